@@ -1,0 +1,185 @@
+"""Model parameters of the digital twin (see docs/model.md for every equation and source).
+
+Every default below is a spec value; nothing in the core hard-codes a number that a user may want
+to change. Units are in the field names (``_m``, ``_s``, ``_mps``, ``_mps2``, ``_dbm``, ``_db``,
+``_hz``, ``_bits``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field, fields
+
+
+class ConfigError(ValueError):
+    """A parameter value outside its allowed range; the message names key, value and range."""
+
+
+def _check_range(name: str, value: float, low: float, high: float, *, low_open=False) -> None:
+    bad = value != value or value > high or (value <= low if low_open else value < low)
+    if bad:
+        bracket = "(" if low_open else "["
+        raise ConfigError(f"{name}={value!r} is outside the allowed range {bracket}{low}, {high}]")
+
+
+@dataclass(frozen=True)
+class PlatoonParams:
+    """Platoon dynamics, spacing policy and control reward (docs/model.md §2)."""
+
+    num_vehicles: int = 4  # leader + followers
+    control_interval_s: float = 0.05  # Δt
+    subframes_per_interval: int = 50  # T
+    driveline_lag_s: float = 0.1  # τ
+    accel_min_mps2: float = -2.6
+    accel_max_mps2: float = 2.6
+    vehicle_length_m: float = 4.0  # L
+    standstill_gap_m: float = 2.0  # r
+    time_headway_s: float = 0.1  # h
+    gap_error_scale_m: float = 15.0  # ê_p
+    speed_error_scale_mps: float = 10.0  # ê_v
+    weight_speed: float = 0.1  # α
+    weight_accel: float = 0.2  # β
+    weight_jerk: float = 0.5  # γ_j
+    collision_penalty: float = -100.0
+    initial_gap_noise_m: float = 0.0  # std of the initial gap perturbation
+    initial_speed_noise_mps: float = 0.0  # std of the initial speed perturbation
+
+    @property
+    def num_followers(self) -> int:
+        return self.num_vehicles - 1
+
+    @property
+    def subframe_s(self) -> float:
+        return self.control_interval_s / self.subframes_per_interval
+
+    @property
+    def jerk_max_mps3(self) -> float:
+        """j_max = 2·u_max/Δt (docs/model.md §2)."""
+        return 2.0 * self.accel_max_mps2 / self.control_interval_s
+
+    def validate(self) -> None:
+        if not 2 <= self.num_vehicles <= 64:
+            raise ConfigError(f"num_vehicles={self.num_vehicles!r} is outside [2, 64]")
+        if not 1 <= self.subframes_per_interval <= 1000:
+            raise ConfigError(
+                f"subframes_per_interval={self.subframes_per_interval!r} is outside [1, 1000]"
+            )
+        _check_range("control_interval_s", self.control_interval_s, 0.0, 10.0, low_open=True)
+        _check_range("driveline_lag_s", self.driveline_lag_s, 0.0, 10.0, low_open=True)
+        _check_range("accel_min_mps2", self.accel_min_mps2, -20.0, 0.0)
+        _check_range("accel_max_mps2", self.accel_max_mps2, 0.0, 20.0, low_open=True)
+        _check_range("vehicle_length_m", self.vehicle_length_m, 0.0, 30.0)
+        _check_range("standstill_gap_m", self.standstill_gap_m, 0.0, 100.0, low_open=True)
+        _check_range("time_headway_s", self.time_headway_s, 0.0, 10.0)
+        for name in ("gap_error_scale_m", "speed_error_scale_mps"):
+            _check_range(name, getattr(self, name), 0.0, 1e6, low_open=True)
+        for name in ("weight_speed", "weight_accel", "weight_jerk"):
+            _check_range(name, getattr(self, name), 0.0, 1e6)
+        _check_range("collision_penalty", self.collision_penalty, -1e9, 0.0)
+        _check_range("initial_gap_noise_m", self.initial_gap_noise_m, 0.0, 10.0)
+        _check_range("initial_speed_noise_mps", self.initial_speed_noise_mps, 0.0, 10.0)
+
+
+@dataclass(frozen=True)
+class RadioParams:
+    """C-V2X sidelink / uplink radio model (docs/model.md §4)."""
+
+    num_subchannels: int = 4  # M
+    subchannel_bandwidth_hz: float = 180e3
+    carrier_ghz: float = 2.0
+    v2i_power_dbm: float = 23.0
+    v2v_power_levels_dbm: tuple[float, ...] = (23.0, 15.0, 5.0)  # plus "off" as the last level
+    cam_size_bits: int = 14_400  # 1800 bytes
+    inter_site_distance_m: float = 1732.0
+    bs_road_offset_m: float = 35.0
+    bs_height_m: float = 25.0
+    vehicle_height_m: float = 1.5
+    vehicle_antenna_gain_db: float = 3.0
+    bs_antenna_gain_db: float = 8.0
+    vehicle_noise_figure_db: float = 9.0
+    bs_noise_figure_db: float = 5.0
+    noise_density_dbm_hz: float = -174.0
+    v2i_shadow_std_db: float = 8.0
+    v2i_decorrelation_m: float = 50.0
+    v2v_shadow_std_db: float = 3.0
+    v2v_decorrelation_m: float = 10.0
+
+    @property
+    def num_power_levels(self) -> int:
+        """Power levels including "off" (the last action of each sub-channel)."""
+        return len(self.v2v_power_levels_dbm) + 1
+
+    @property
+    def num_actions(self) -> int:
+        """Size of an RRA agent's Discrete action space: M·P (sub-channel × power level)."""
+        return self.num_subchannels * self.num_power_levels
+
+    @property
+    def noise_power_dbm(self) -> float:
+        """Thermal noise in one sub-channel, −174 dBm/Hz + 10·log10(B) (docs/model.md §4.4)."""
+        return self.noise_density_dbm_hz + 10.0 * math.log10(self.subchannel_bandwidth_hz)
+
+    def validate(self) -> None:
+        if not 1 <= self.num_subchannels <= 64:
+            raise ConfigError(f"num_subchannels={self.num_subchannels!r} is outside [1, 64]")
+        _check_range("subchannel_bandwidth_hz", self.subchannel_bandwidth_hz, 0.0, 1e9, low_open=True)
+        _check_range("carrier_ghz", self.carrier_ghz, 0.0, 100.0, low_open=True)
+        _check_range("v2i_power_dbm", self.v2i_power_dbm, -50.0, 46.0)
+        if len(self.v2v_power_levels_dbm) == 0:
+            raise ConfigError("v2v_power_levels_dbm=() must hold at least one level in [-50, 46]")
+        for level in self.v2v_power_levels_dbm:
+            _check_range("v2v_power_levels_dbm", level, -50.0, 46.0)
+        if not 1 <= self.cam_size_bits <= 10_000_000:
+            raise ConfigError(f"cam_size_bits={self.cam_size_bits!r} is outside [1, 10000000]")
+        _check_range("inter_site_distance_m", self.inter_site_distance_m, 1.0, 1e6)
+        _check_range("bs_road_offset_m", self.bs_road_offset_m, 0.0, 1e4)
+        _check_range("bs_height_m", self.bs_height_m, 1.0, 500.0)
+        _check_range("vehicle_height_m", self.vehicle_height_m, 1.0, 10.0, low_open=True)
+        for name in ("v2i_shadow_std_db", "v2v_shadow_std_db"):
+            _check_range(name, getattr(self, name), 0.0, 30.0)
+        for name in ("v2i_decorrelation_m", "v2v_decorrelation_m"):
+            _check_range(name, getattr(self, name), 0.0, 1e5, low_open=True)
+
+
+@dataclass(frozen=True)
+class TwinParams:
+    """Everything a digital twin needs: platoon, radio and episode settings."""
+
+    platoon: PlatoonParams = field(default_factory=PlatoonParams)
+    radio: RadioParams = field(default_factory=RadioParams)
+    episode_intervals: int = 400  # 20 s at Δt = 50 ms
+    traces: str = "synthetic"  # name of the leader trace set (vdtn_marl.data)
+
+    def validate(self) -> TwinParams:
+        self.platoon.validate()
+        self.radio.validate()
+        if not 1 <= self.episode_intervals <= 10_000_000:
+            raise ConfigError(
+                f"episode_intervals={self.episode_intervals!r} is outside [1, 10000000]"
+            )
+        return self
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_overrides(cls, **overrides) -> TwinParams:
+        """Build params from flat keyword overrides, e.g. ``num_vehicles=6, cam_size_bits=8000``.
+
+        Unknown keys raise a :class:`ConfigError` listing the known ones.
+        """
+        platoon_keys = {f.name for f in fields(PlatoonParams)}
+        radio_keys = {f.name for f in fields(RadioParams)}
+        top_keys = {"episode_intervals", "traces"}
+        platoon_kw, radio_kw, top_kw = {}, {}, {}
+        for key, value in overrides.items():
+            if key in platoon_keys:
+                platoon_kw[key] = value
+            elif key in radio_keys:
+                radio_kw[key] = tuple(value) if key == "v2v_power_levels_dbm" else value
+            elif key in top_keys:
+                top_kw[key] = value
+            else:
+                known = sorted(platoon_keys | radio_keys | top_keys)
+                raise ConfigError(f"unknown model parameter {key!r}; known: {', '.join(known)}")
+        return cls(PlatoonParams(**platoon_kw), RadioParams(**radio_kw), **top_kw).validate()
