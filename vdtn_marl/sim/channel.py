@@ -1,0 +1,99 @@
+"""Large-scale and fast fading channel model (docs/model.md §4.2–4.3).
+
+Geometry: a straight highway along x; every vehicle drives in one lane at y = 0, height
+``vehicle_height_m``; base stations stand every ``inter_site_distance_m`` at y =
+``bs_road_offset_m``, height ``bs_height_m``. All functions are batched over leading dimensions
+and return float tensors in dB (path loss, shadowing) or linear power gain (fast fading).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from vdtn_marl.sim.params import RadioParams
+
+SPEED_OF_LIGHT_MPS = 3e8
+
+
+def v2i_pathloss_db(distance_3d_m: torch.Tensor) -> torch.Tensor:
+    """V2I path loss 128.1 + 37.6·log10(d/km) in dB (TR 36.885 macro; docs/model.md §4.2)."""
+    return 128.1 + 37.6 * torch.log10(distance_3d_m.clamp_min(1.0) / 1000.0)
+
+
+def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tensor:
+    """WINNER+ B1 line-of-sight path loss in dB, in the form of Liang et al.'s simulator.
+
+    PL = 22.7·log10(d) + 41 + 20·log10(f/5 GHz) for 3 m < d < d_bp, with d clamped to 3 m below;
+    PL = 40·log10(d) + 9.45 − 17.3·log10(h_tx) − 17.3·log10(h_rx) + 2.7·log10(f/5 GHz) beyond
+    the breakpoint d_bp = 4·(h_tx − 1)·(h_rx − 1)·f/c (both antennas at ``vehicle_height_m``).
+    """
+    f_ghz = radio.carrier_ghz
+    h = radio.vehicle_height_m
+    breakpoint_m = 4.0 * (h - 1.0) ** 2 * f_ghz * 1e9 / SPEED_OF_LIGHT_MPS
+    d = distance_m.clamp_min(3.0)
+    near = 22.7 * torch.log10(d) + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
+    far = (
+        40.0 * torch.log10(d)
+        + 9.45
+        - 2 * 17.3 * math.log10(h)
+        + 2.7 * math.log10(f_ghz / 5.0)
+    )
+    return torch.where(d < breakpoint_m, near, far)
+
+
+def serving_bs_x_m(
+    centroid_x_m: torch.Tensor, bs_offset_m: torch.Tensor, radio: RadioParams
+) -> torch.Tensor:
+    """Along-road position of the base station nearest to ``centroid_x_m`` (m), shape [B]."""
+    isd = radio.inter_site_distance_m
+    return bs_offset_m + isd * torch.round((centroid_x_m - bs_offset_m) / isd)
+
+
+def v2i_distance_m(
+    vehicle_x_m: torch.Tensor, bs_x_m: torch.Tensor, radio: RadioParams
+) -> torch.Tensor:
+    """3-D vehicle-to-BS distance in m; ``vehicle_x_m`` [B, N], ``bs_x_m`` [B] → [B, N]."""
+    dx = vehicle_x_m - bs_x_m[:, None]
+    dz = radio.bs_height_m - radio.vehicle_height_m
+    return torch.sqrt(dx * dx + radio.bs_road_offset_m**2 + dz * dz)
+
+
+def v2v_distance_m(vehicle_x_m: torch.Tensor) -> torch.Tensor:
+    """Pairwise vehicle distance in m (same lane, same height), [B, N] → [B, N, N]."""
+    return (vehicle_x_m[:, :, None] - vehicle_x_m[:, None, :]).abs()
+
+
+def symmetric_normal(shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
+    """Standard normal [..., N, N] with X[i, j] = X[j, i] (reciprocal links), unit variance."""
+    x = torch.randn(shape, generator=generator, device=generator.device)
+    return (x + x.transpose(-1, -2)) * (0.5**0.5)
+
+
+def shadowing_update_db(
+    shadow_db: torch.Tensor,
+    moved_m: torch.Tensor,
+    std_db: float,
+    decorrelation_m: float,
+    innovation: torch.Tensor,
+) -> torch.Tensor:
+    """Gudmundson AR(1) log-normal shadowing update (docs/model.md §4.3).
+
+    s' = ρ·s + sqrt(1 − ρ²)·σ·n with ρ = exp(−Δd/d_corr); ``moved_m`` broadcasts to ``shadow_db``
+    and ``innovation`` is a standard normal draw of the same shape.
+    """
+    rho = torch.exp(-moved_m / decorrelation_m)
+    return rho * shadow_db + torch.sqrt((1.0 - rho * rho).clamp_min(0.0)) * std_db * innovation
+
+
+def rayleigh_power_gain(shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
+    """Rayleigh fast-fading power gains |h|² = (x² + y²)/2 with x, y ~ N(0, 1); mean 1."""
+    xy = torch.randn((2, *shape), generator=generator, device=generator.device)
+    return 0.5 * (xy[0] * xy[0] + xy[1] * xy[1])
+
+
+def db_to_linear(db: torch.Tensor | float) -> torch.Tensor | float:
+    if isinstance(db, torch.Tensor):
+        return torch.pow(10.0, db / 10.0)
+    return 10.0 ** (db / 10.0)

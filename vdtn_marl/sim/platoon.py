@@ -1,0 +1,243 @@
+"""Longitudinal platoon dynamics, spacing policy, errors and control reward (docs/model.md §2).
+
+Vehicle 0 is the leader (follows a speed trace); vehicles 1..N−1 are followers with a
+first-order driveline lag. Every function is batched over B scenarios and pure: it takes a
+:class:`PlatoonState` and returns a new one, so the twin and counterfactual VoI rollouts share
+the same physics.
+
+Integration is explicit Euler per 1 ms subframe with a zero-order hold on the command in
+force. Within an interval the command switches once, from u_{k−1} to u_k at subframe d, so the
+T-step recursion has the closed form z_T = Φ^T·z_0 + (G_T − G_{T−d})·u_{k−1} + G_{T−d}·u_k with
+G_n = Σ_{j<n} Φ^j·Γ, which :class:`IntervalIntegrator` precomputes once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import torch
+
+from vdtn_marl.sim.params import PlatoonParams
+
+#: Vehicle observation features, in order (docs/model.md §2.4).
+VEHICLE_OBS_FEATURES = (
+    "gap_error_m",
+    "speed_error_mps",
+    "accel_mps2",
+    "cam_pred_accel_mps2",
+    "cam_pred_command_mps2",
+    "cam_delay_ms",
+    "cam_age_ms",
+    "prev_command_mps2",
+)
+GAP_ERROR_BOUND_M = 200.0
+SPEED_ERROR_BOUND_MPS = 50.0
+CAM_AGE_BOUND_MS = 10_000.0
+
+
+@dataclass
+class PlatoonState:
+    """Kinematic state of B platoons at a control-interval boundary.
+
+    ``command_mps2`` holds the command in force at the interval start (u_{k−1}) for every
+    vehicle; for the leader it is its acceleration over the previous interval.
+    """
+
+    position_m: torch.Tensor  # [B, N], along the road; leader has the largest position
+    speed_mps: torch.Tensor  # [B, N]
+    accel_mps2: torch.Tensor  # [B, N]
+    command_mps2: torch.Tensor  # [B, N]
+
+    def clone(self) -> PlatoonState:
+        return PlatoonState(*(getattr(self, f.name).clone() for f in fields(self)))
+
+    def where(self, mask: torch.Tensor, other: PlatoonState) -> PlatoonState:
+        """Per scenario: ``other`` where ``mask`` [B] is True, else self."""
+        m = mask[:, None]
+        return PlatoonState(
+            *(torch.where(m, getattr(other, f.name), getattr(self, f.name)) for f in fields(self))
+        )
+
+    def repeat(self, times: int) -> PlatoonState:
+        """Repeat every scenario ``times`` times along the batch (branch-major: [times·B])."""
+        return PlatoonState(*(getattr(self, f.name).repeat(times, 1) for f in fields(self)))
+
+
+def gaps_m(position_m: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
+    """Bumper-to-bumper gap g_i = p_{i−1} − p_i − L of each follower, [B, N] → [B, N−1]."""
+    return position_m[:, :-1] - position_m[:, 1:] - params.vehicle_length_m
+
+
+def desired_gaps_m(speed_mps: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
+    """Constant-time-headway desired gap d_i = r + h·v_i of each follower, [B, N−1]."""
+    return params.standstill_gap_m + params.time_headway_s * speed_mps[:, 1:]
+
+
+def spacing_errors(state: PlatoonState, params: PlatoonParams) -> tuple[torch.Tensor, torch.Tensor]:
+    """Gap error e_p = g − d (m) and speed error e_v = v_{i−1} − v_i (m/s), each [B, N−1]."""
+    gap_error = gaps_m(state.position_m, params) - desired_gaps_m(state.speed_mps, params)
+    speed_error = state.speed_mps[:, :-1] - state.speed_mps[:, 1:]
+    return gap_error, speed_error
+
+
+def initial_state(
+    leader_speed_mps: torch.Tensor,
+    params: PlatoonParams,
+    generator: torch.Generator,
+) -> PlatoonState:
+    """Every follower at the desired gap and the leader's speed, a = 0 (plus optional noise).
+
+    ``leader_speed_mps`` [B]; the leader starts at position 0 m.
+    """
+    b, n = leader_speed_mps.shape[0], params.num_vehicles
+    dev = leader_speed_mps.device
+    speed = leader_speed_mps[:, None].expand(b, n).clone()
+    if params.initial_speed_noise_mps > 0:
+        noise = torch.randn(b, n - 1, generator=generator, device=dev)
+        speed[:, 1:] = (speed[:, 1:] + params.initial_speed_noise_mps * noise).clamp_min(0.0)
+    spacing = params.vehicle_length_m + desired_gaps_m(speed, params)  # [B, N−1]
+    if params.initial_gap_noise_m > 0:
+        noise = torch.randn(b, n - 1, generator=generator, device=dev)
+        spacing = spacing + (params.initial_gap_noise_m * noise).clamp(
+            -0.5 * params.standstill_gap_m, None
+        )
+    position = torch.cat(
+        [torch.zeros(b, 1, device=dev), -torch.cumsum(spacing, dim=1)], dim=1
+    )
+    zeros = torch.zeros(b, n, device=dev)
+    return PlatoonState(position, speed, zeros.clone(), zeros)
+
+
+class IntervalIntegrator:
+    """Exact composition of T explicit-Euler subframe steps with one command switch.
+
+    Per subframe (dt = Δt/T), for a follower z = [p, v, a]:
+    p' = p + dt·v,  v' = v + dt·a,  a' = a + (dt/τ)·(u − a).
+    The leader's acceleration is set by the trace and constant within the interval.
+    """
+
+    def __init__(self, params: PlatoonParams, device: torch.device, dtype=torch.float32):
+        self.params = params
+        t, dt, tau = params.subframes_per_interval, params.subframe_s, params.driveline_lag_s
+        phi = torch.tensor(
+            [[1.0, dt, 0.0], [0.0, 1.0, dt], [0.0, 0.0, 1.0 - dt / tau]], dtype=torch.float64
+        )
+        gamma = torch.tensor([0.0, 0.0, dt / tau], dtype=torch.float64)
+        powers = [torch.eye(3, dtype=torch.float64)]
+        for _ in range(t):
+            powers.append(phi @ powers[-1])
+        # G_n = Σ_{j<n} Φ^j Γ, n = 0..T
+        g = torch.zeros(t + 1, 3, dtype=torch.float64)
+        for n in range(1, t + 1):
+            g[n] = g[n - 1] + powers[n - 1] @ gamma
+        self.phi_t = powers[t].to(device=device, dtype=dtype)  # [3, 3]
+        self.input_gain = g.to(device=device, dtype=dtype)  # [T+1, 3]
+        self.leader_pos_gain = dt * dt * t * (t - 1) / 2.0  # p += T·dt·v + this·a
+
+    def integrate(
+        self,
+        state: PlatoonState,
+        leader_accel_mps2: torch.Tensor,
+        command_mps2: torch.Tensor,
+        switch_subframe: torch.Tensor,
+    ) -> PlatoonState:
+        """State at the end of the interval.
+
+        ``leader_accel_mps2`` [B]; ``command_mps2`` [B, N−1] = u_k, clipped to the actuator
+        bounds; ``switch_subframe`` [B, N−1] int in 0..T: u_{k−1} is in force for subframes
+        < d and u_k from d on (d = T: u_k takes force at the next interval).
+        """
+        p = self.params
+        t = p.subframes_per_interval
+        u_new = command_mps2.clamp(p.accel_min_mps2, p.accel_max_mps2)
+        u_old = state.command_mps2[:, 1:]
+        z = torch.stack(
+            [state.position_m[:, 1:], state.speed_mps[:, 1:], state.accel_mps2[:, 1:]], dim=-1
+        )
+        g_all = self.input_gain[t]  # [3]
+        g_new = self.input_gain[t - switch_subframe]  # [B, F, 3]
+        z = z @ self.phi_t.T + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
+
+        interval_s = p.control_interval_s
+        lead_v = state.speed_mps[:, 0]
+        lead_p = state.position_m[:, 0] + interval_s * lead_v + self.leader_pos_gain * leader_accel_mps2
+        lead_v = (lead_v + interval_s * leader_accel_mps2).clamp_min(0.0)
+
+        position = torch.cat([lead_p[:, None], z[..., 0]], dim=1)
+        speed = torch.cat([lead_v[:, None], z[..., 1].clamp_min(0.0)], dim=1)
+        accel = torch.cat([leader_accel_mps2[:, None], z[..., 2]], dim=1)
+        # u_k is in force at the start of the next interval, whatever its switch time was
+        command = torch.cat([leader_accel_mps2[:, None], u_new], dim=1)
+        return PlatoonState(position, speed, accel, command)
+
+
+def control_reward(
+    gap_error_m: torch.Tensor,
+    speed_error_mps: torch.Tensor,
+    command_mps2: torch.Tensor,
+    prev_command_mps2: torch.Tensor,
+    params: PlatoonParams,
+) -> torch.Tensor:
+    """r = −(|e_p|/ê_p + α|e_v|/ê_v + β|u|/u_max + γ_j|jerk|/j_max), [B, N−1] (docs §2.3).
+
+    Errors are those at the end of the interval; jerk = (u_k − u_{k−1})/Δt.
+    """
+    jerk = (command_mps2 - prev_command_mps2) / params.control_interval_s
+    return -(
+        gap_error_m.abs() / params.gap_error_scale_m
+        + params.weight_speed * speed_error_mps.abs() / params.speed_error_scale_mps
+        + params.weight_accel * command_mps2.abs() / params.accel_max_mps2
+        + params.weight_jerk * jerk.abs() / params.jerk_max_mps3
+    )
+
+
+def vehicle_observation(
+    state: PlatoonState,
+    cam_content: torch.Tensor,
+    cam_delay_ms: torch.Tensor,
+    cam_age_ms: torch.Tensor,
+    params: PlatoonParams,
+) -> torch.Tensor:
+    """Follower observations [B, N−1, 8] in the order of :data:`VEHICLE_OBS_FEATURES`.
+
+    Own gap/speed error and acceleration come from local sensing at the interval start;
+    ``cam_content`` [B, N−1, 2] is the predecessor's (acceleration, command) from the CAM used
+    for the decision; ``cam_delay_ms`` is when the decision's command takes force (0 = at the
+    interval start, T = not in this interval) and ``cam_age_ms`` the age of the CAM content at
+    the interval start. Values are clipped to the observation space bounds.
+    """
+    gap_error, speed_error = spacing_errors(state, params)
+    lo, hi = params.accel_min_mps2, params.accel_max_mps2
+    return torch.stack(
+        [
+            gap_error.clamp(-GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M),
+            speed_error.clamp(-SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS),
+            state.accel_mps2[:, 1:].clamp(lo, hi),
+            cam_content[..., 0].clamp(lo, hi),
+            cam_content[..., 1].clamp(lo, hi),
+            cam_delay_ms.to(gap_error.dtype),
+            cam_age_ms.to(gap_error.dtype).clamp(0.0, CAM_AGE_BOUND_MS),
+            state.command_mps2[:, 1:].clamp(lo, hi),
+        ],
+        dim=-1,
+    )
+
+
+def cam_snapshot(state: PlatoonState) -> torch.Tensor:
+    """CAM content each follower would receive from its predecessor now: [B, N−1, 2]."""
+    return torch.stack([state.accel_mps2[:, :-1], state.command_mps2[:, :-1]], dim=-1)
+
+
+def perfect_observation(state: PlatoonState, params: PlatoonParams) -> torch.Tensor:
+    """Observation with an exact, instantaneous CAM (delay 0, age 0), [B, N−1, 8]."""
+    zeros = torch.zeros_like(state.speed_mps[:, 1:])
+    return vehicle_observation(state, cam_snapshot(state), zeros, zeros, params)
+
+
+def vehicle_observation_bounds(params: PlatoonParams) -> tuple[list[float], list[float]]:
+    """Lower and upper bounds of every vehicle observation feature."""
+    lo, hi = params.accel_min_mps2, params.accel_max_mps2
+    t_ms = params.subframes_per_interval * params.subframe_s * 1000.0
+    low = [-GAP_ERROR_BOUND_M, -SPEED_ERROR_BOUND_MPS, lo, lo, lo, 0.0, 0.0, lo]
+    high = [GAP_ERROR_BOUND_M, SPEED_ERROR_BOUND_MPS, hi, hi, hi, t_ms, CAM_AGE_BOUND_MS, hi]
+    return low, high

@@ -1,0 +1,433 @@
+"""The digital twin: B platoon scenarios with their radio links, stepped on two timescales.
+
+Life cycle of one control interval k (docs/model.md §1, §4.5):
+
+1. :meth:`DigitalTwin.begin_interval` — at kΔt the predecessor of every follower generates
+   CAM_k (its acceleration and command), the large-scale channel is updated from the
+   positions, and the fast fading of the interval's T subframes is drawn.
+2. :meth:`DigitalTwin.step_subframe` × T — the RRA actions of every V2V link transmit the
+   CAMs; V2I rates and CAM delivery subframes are recorded.
+3. :meth:`DigitalTwin.vehicle_observation` — what each follower knows when it decides u_k.
+4. :meth:`DigitalTwin.finish_interval` — the platoon is integrated over the interval with the
+   command switching from u_{k−1} to u_k when CAM_k arrived, and the control reward is paid.
+
+The twin knows nothing of RL APIs. Every random number comes from one seeded
+``torch.Generator`` on the twin's device.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from vdtn_marl.data.traces import TraceSource, get_trace_source
+from vdtn_marl.sim import channel, link
+from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.platoon import (
+    IntervalIntegrator,
+    PlatoonState,
+    cam_snapshot,
+    control_reward,
+    gaps_m,
+    initial_state,
+    perfect_observation,
+    spacing_errors,
+    vehicle_observation,
+)
+
+#: Number of RRA control features per link appended to the CSI features.
+RRA_CONTROL_FEATURES = 4
+RRA_CONTROL_CLIP = 5.0
+
+
+@dataclass
+class IntervalRecord:
+    """Everything that happened in one control interval, per scenario (torch tensors).
+
+    ``state_before``/``state_after`` are the perfect states S_k and S_{k+1}; ``interval`` [B]
+    is k. ``switch_subframe`` [B, F] is when u_k took force. ``cam_delay_subframes`` [B, L]
+    is the CAM delivery subframe (1..T, T+1 = lost); ``v2i_rate_bps`` [B, M] is the interval
+    mean.
+    """
+
+    interval: torch.Tensor
+    state_before: PlatoonState
+    state_after: PlatoonState
+    command_mps2: torch.Tensor
+    switch_subframe: torch.Tensor
+    reward: torch.Tensor
+    gap_error_m: torch.Tensor
+    speed_error_mps: torch.Tensor
+    collided: torch.Tensor
+    truncated: torch.Tensor
+    cam_delay_subframes: torch.Tensor
+    v2i_rate_bps: torch.Tensor
+
+
+def resolve_device(device: str | torch.device) -> torch.device:
+    """Validate a device string; a CUDA device where none exists is a clear error."""
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as err:
+        raise ConfigError(f"device={device!r} is not a valid torch device ('cpu', 'cuda', 'cuda:0')") from err
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ConfigError(f"device={device!r} requested but CUDA is not available; use 'cpu'")
+    return dev
+
+
+class DigitalTwin:
+    """B scenarios of the VDTN platoon model, batched in torch.
+
+    Args:
+        params: model parameters (defaults: the case study).
+        batch_size: B ≥ 1 independent scenarios.
+        device: torch device of all tensors.
+        seed: seed of the twin's generator (None: non-deterministic).
+        trace_source: leader trace set, by name or instance (default ``params.traces``).
+        radio: simulate the radio (False for the perfect-observation control env: faster,
+            and CAMs are then exact and instantaneous).
+        backend: ``"torch"`` or ``"numpy"``; ``"numpy"`` runs the per-subframe kernel on NumPy
+            views of the interval tables (CPU, single scenario fast path). Draws stay in torch.
+        lookahead_intervals: extra leader trace beyond the episode, for VoI rollouts.
+    """
+
+    def __init__(
+        self,
+        params: TwinParams | None = None,
+        batch_size: int = 1,
+        device: str | torch.device = "cpu",
+        seed: int | None = None,
+        trace_source: str | TraceSource | None = None,
+        radio: bool = True,
+        backend: str = "torch",
+        lookahead_intervals: int = 200,
+    ):
+        self.params = (params or TwinParams()).validate()
+        if not isinstance(batch_size, int | np.integer) or isinstance(batch_size, bool) or batch_size < 1:
+            raise ConfigError(f"batch_size={batch_size!r} must be an integer >= 1")
+        if backend not in ("torch", "numpy"):
+            raise ConfigError(f"backend={backend!r} must be one of 'torch', 'numpy'")
+        self.device = resolve_device(device)
+        if backend == "numpy" and self.device.type != "cpu":
+            raise ConfigError(f"backend='numpy' needs device='cpu', got device={device!r}")
+        if lookahead_intervals < 0:
+            raise ConfigError(f"lookahead_intervals={lookahead_intervals!r} must be >= 0")
+        self.batch_size = int(batch_size)
+        self.radio_enabled = radio
+        self.backend = backend
+        self.lookahead_intervals = lookahead_intervals
+        self.trace_source = get_trace_source(trace_source or self.params.traces)
+        self.generator = torch.Generator(device=self.device)
+
+        pp, rp = self.params.platoon, self.params.radio
+        self.num_followers = pp.num_followers
+        self.num_links = pp.num_followers
+        self.num_subchannels = rp.num_subchannels
+        self.subframes_per_interval = pp.subframes_per_interval
+        self.subframe_ms = pp.subframe_s * 1000.0
+        self.interval_ms = pp.control_interval_s * 1000.0
+        self.rra_obs_dim = 4 * rp.num_subchannels + 2 + RRA_CONTROL_FEATURES
+        self.integrator = IntervalIntegrator(pp, self.device)
+        self._decode_torch = link.ActionTables.build(rp, self.device)
+        self._const_torch = link.KernelConstants.build(
+            rp, pp.subframe_s, self.batch_size, self.num_links, self.device
+        )
+        self._decode = self._decode_torch.numpy() if backend == "numpy" else self._decode_torch
+        self._const = self._const_torch.numpy() if backend == "numpy" else self._const_torch
+        self.seed(seed)
+        self.reset()
+
+    # ------------------------------------------------------------------ set-up
+    def seed(self, seed: int | None) -> None:
+        """Re-seed the twin's generator (None: a non-deterministic seed)."""
+        if seed is None:
+            self.generator.seed()
+        else:
+            if not isinstance(seed, int | np.integer) or seed < 0:
+                raise ConfigError(f"seed={seed!r} must be a non-negative integer or None")
+            self.generator.manual_seed(int(seed))
+
+    def reset(self, seed: int | None = None, mask: torch.Tensor | None = None) -> None:
+        """Start new episodes in all scenarios, or only where ``mask`` [B] is True."""
+        if seed is not None:
+            self.seed(seed)
+        b, pp, rp = self.batch_size, self.params.platoon, self.params.radio
+        dev = self.device
+        num_points = self.params.episode_intervals + 1 + self.lookahead_intervals
+        count = b if mask is None else int(mask.sum())
+        if count == 0:
+            return
+        traces = self.trace_source.sample(count, num_points, pp.control_interval_s, self.generator)
+        traces = traces.to(device=dev, dtype=torch.float32)
+        if not torch.isfinite(traces).all() or (traces < 0).any():
+            raise ValueError(f"trace source {self.trace_source.info.name!r} returned non-finite or negative speeds")
+        state = initial_state(traces[:, 0], pp, self.generator)
+        v2v_shadow = rp.v2v_shadow_std_db * channel.symmetric_normal(
+            (count, pp.num_vehicles, pp.num_vehicles), self.generator
+        )
+        v2i_shadow = rp.v2i_shadow_std_db * torch.randn(
+            count, pp.num_vehicles, generator=self.generator, device=dev
+        )
+        bs_offset = rp.inter_site_distance_m * torch.rand(count, generator=self.generator, device=dev)
+        cam_held = cam_snapshot(state)
+        if mask is None:
+            self.leader_speed_mps = traces
+            self.platoon = state
+            self.v2v_shadow_db, self.v2i_shadow_db = v2v_shadow, v2i_shadow
+            self.bs_offset_m = bs_offset
+            self.shadow_position_m = state.position_m.clone()
+            self.interval = torch.zeros(b, dtype=torch.long, device=dev)
+            self.cam_held = cam_held
+            self.cam_held_interval = torch.full((b, self.num_followers), -1, device=dev)
+            self.begin_interval()
+            return
+        idx = mask.nonzero().squeeze(-1)
+        self.leader_speed_mps[idx] = traces
+        self.platoon = PlatoonState(
+            *(self._scatter(getattr(self.platoon, k), idx, getattr(state, k)) for k in
+              ("position_m", "speed_mps", "accel_mps2", "command_mps2"))
+        )
+        self.v2v_shadow_db[idx] = v2v_shadow
+        self.v2i_shadow_db[idx] = v2i_shadow
+        self.bs_offset_m[idx] = bs_offset
+        self.shadow_position_m[idx] = state.position_m
+        self.interval[idx] = 0
+        self.cam_held[idx] = cam_held
+        self.cam_held_interval[idx] = -1
+        self.begin_interval(mask)
+
+    @staticmethod
+    def _scatter(base: torch.Tensor, idx: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
+        out = base.clone()
+        out[idx] = values
+        return out
+
+    # ------------------------------------------------------------------ interval start
+    def begin_interval(self, mask: torch.Tensor | None = None) -> None:
+        """Generate CAM_k, update the large-scale channel, draw the interval's fast fading.
+
+        With ``mask`` only the masked scenarios start a new interval (after a partial reset);
+        the others keep their current interval unchanged.
+        """
+        snapshot = cam_snapshot(self.platoon)
+        self.cam_snapshot = snapshot if mask is None else torch.where(mask[:, None, None], snapshot, self.cam_snapshot)
+        self.subframe = 0
+        if not self.radio_enabled:
+            return
+        rp, t = self.params.radio, self.subframes_per_interval
+        tables = self._draw_interval_tables()
+        link_state = link.new_link_state(
+            self.batch_size, self.num_links, self.num_subchannels, rp, t, self.device
+        )
+        obs = self._rra_observation_buffer(tables)
+        v2i_sum = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+        if mask is not None:
+            tables, link_state, obs, v2i_sum = self._merge_interval(mask, tables, link_state, obs, v2i_sum)
+        if self.backend == "numpy":
+            tables, link_state = tables.numpy(), link_state.numpy()
+            obs, v2i_sum = obs.numpy(), v2i_sum.numpy()
+        self.tables, self.link_state, self._rra_obs, self._v2i_rate_sum = tables, link_state, obs, v2i_sum
+
+    def _merge_interval(self, mask, tables, link_state, obs, v2i_sum):
+        def merge(new, old, batch_dim):
+            old = torch.as_tensor(old, device=self.device)
+            shape = [1] * new.dim()
+            shape[batch_dim] = -1
+            return torch.where(mask.view(shape), new, old)
+
+        tables = link.IntervalTables(
+            *(merge(getattr(tables, k), getattr(self.tables, k), 1) for k in
+              ("own_gain", "v2i_to_rx_mw", "tx_to_bs_gain", "cross_gain", "v2i_signal_mw"))
+        )
+        link_state = link.LinkState(
+            *(merge(getattr(link_state, k), getattr(self.link_state, k), 0) for k in
+              ("remaining_bits", "delay_subframes", "occupancy"))
+        )
+        return tables, link_state, merge(obs, self._rra_obs, 1), merge(v2i_sum, self._v2i_rate_sum, 0)
+
+    def _draw_interval_tables(self) -> link.IntervalTables:
+        rp = self.params.radio
+        x = self.platoon.position_m
+        moved = (x - self.shadow_position_m).abs()
+        self.shadow_position_m = x.clone()
+        g = self.generator
+        n = x.shape[1]
+        self.v2v_shadow_db = channel.shadowing_update_db(
+            self.v2v_shadow_db, moved[:, :, None] + moved[:, None, :], rp.v2v_shadow_std_db,
+            rp.v2v_decorrelation_m, channel.symmetric_normal((self.batch_size, n, n), g),
+        )
+        self.v2i_shadow_db = channel.shadowing_update_db(
+            self.v2i_shadow_db, moved, rp.v2i_shadow_std_db, rp.v2i_decorrelation_m,
+            torch.randn(self.batch_size, n, generator=g, device=self.device),
+        )
+        bs_x = channel.serving_bs_x_m(x.mean(dim=1), self.bs_offset_m, rp)
+        v2v_db, v2i_db = link.large_scale_gains_db(
+            channel.v2v_pathloss_db(channel.v2v_distance_m(x), rp),
+            self.v2v_shadow_db,
+            channel.v2i_pathloss_db(channel.v2i_distance_m(x, bs_x, rp)),
+            self.v2i_shadow_db,
+            rp,
+        )
+        return link.build_interval_tables(v2v_db, v2i_db, rp, self.subframes_per_interval, g)
+
+    def _rra_observation_buffer(self, tables: link.IntervalTables) -> torch.Tensor:
+        """[T, B, L, D]: CSI blocks, (occupancy, remaining bits: filled per subframe), time, control."""
+        t, b, n_l, m = self.subframes_per_interval, self.batch_size, self.num_links, self.num_subchannels
+        pp = self.params.platoon
+        csi = link.rra_static_observation(tables, self.params.radio, self._const_torch.noise_mw)
+        gap_error, speed_error = spacing_errors(self.platoon, pp)
+        control = torch.stack(
+            [
+                gap_error / pp.gap_error_scale_m,
+                speed_error / pp.speed_error_scale_mps,
+                self.platoon.accel_mps2[:, :-1] / pp.accel_max_mps2,
+                self.platoon.command_mps2[:, 1:] / pp.accel_max_mps2,
+            ],
+            dim=-1,
+        ).clamp(-RRA_CONTROL_CLIP, RRA_CONTROL_CLIP)
+        time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
+        obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
+        obs[..., : 3 * m] = csi
+        obs[..., 3 * m : 4 * m] = 0.0
+        obs[..., 4 * m] = 1.0
+        obs[..., 4 * m + 1] = time_left[:, None, None]
+        obs[..., 4 * m + 2 :] = control
+        return obs
+
+    # ------------------------------------------------------------------ subframes
+    def step_subframe(self, actions) -> link.SubframeOutcome:
+        """Transmit one 1 ms subframe with RRA ``actions`` [B, L] (ints in [0, M·P)).
+
+        Arrays are torch tensors, or NumPy arrays with ``backend="numpy"``.
+        """
+        if not self.radio_enabled:
+            raise RuntimeError("this twin was built with radio=False; it has no subframes")
+        t = self.subframe
+        if t >= self.subframes_per_interval:
+            raise RuntimeError(
+                f"all {self.subframes_per_interval} subframes of the interval have run; "
+                "call finish_interval() first"
+            )
+        self._check_rra_actions(actions)
+        outcome = link.subframe_step(self.tables, t, actions, self.link_state, self._decode, self._const)
+        self._v2i_rate_sum += outcome.v2i_rate_bps
+        self.subframe = t + 1
+        return outcome
+
+    def _check_rra_actions(self, actions) -> None:
+        expected = (self.batch_size, self.num_links)
+        if tuple(actions.shape) != expected:
+            raise ValueError(f"RRA actions have shape {tuple(actions.shape)}, expected {expected}")
+        n_act = self.params.radio.num_actions
+        if self.backend == "numpy":
+            bad = actions.dtype.kind not in "iu" or actions.min() < 0 or actions.max() >= n_act
+        else:
+            bad = actions.dtype.is_floating_point or bool(((actions < 0) | (actions >= n_act)).any())
+        if bad:
+            count = actions.size if self.backend == "numpy" else actions.numel()
+            shown = actions.tolist() if count <= 16 else f"array of {count}"
+            raise ValueError(
+                f"RRA actions {shown} must be integers in [0, {n_act - 1}] "
+                "(sub-channel × power level)"
+            )
+
+    def rra_observation(self):
+        """RRA observations [B, L, D] for the next subframe (docs/model.md §4.6)."""
+        m = self.num_subchannels
+        t = min(self.subframe, self.subframes_per_interval - 1)
+        obs = self._rra_obs[t]
+        obs[..., 3 * m : 4 * m] = self.link_state.occupancy[:, None, :] / self.num_links
+        remaining = self.link_state.remaining_bits / self.params.radio.cam_size_bits
+        obs[..., 4 * m] = remaining.clip(0.0, 1.0) if self.backend == "numpy" else remaining.clamp(0.0, 1.0)
+        return obs
+
+    # ------------------------------------------------------------------ interval end
+    def _delivery_subframes(self) -> torch.Tensor:
+        return torch.as_tensor(self.link_state.delay_subframes, device=self.device)
+
+    def switch_subframe(self, perfect: bool) -> torch.Tensor:
+        """When u_k takes force in this interval, [B, F] int (docs/model.md §4.5).
+
+        0 with perfect observation; otherwise the CAM's delivery subframe if it arrived in the
+        first T−1 subframes, else T (the decision is taken at the deadline on an older CAM and
+        its command takes force at the next interval).
+        """
+        t = self.subframes_per_interval
+        if perfect:
+            return torch.zeros(self.batch_size, self.num_followers, dtype=torch.long, device=self.device)
+        delay = self._delivery_subframes()
+        return torch.where(delay <= t - 1, delay, torch.full_like(delay, t))
+
+    def vehicle_observation(self, perfect: bool) -> torch.Tensor:
+        """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5)."""
+        if perfect:
+            return perfect_observation(self.platoon, self.params.platoon)
+        switch = self.switch_subframe(perfect=False)
+        usable = switch < self.subframes_per_interval
+        content = torch.where(usable[..., None], self.cam_snapshot, self.cam_held)
+        age_intervals = (self.interval[:, None] - self.cam_held_interval).float()
+        age_ms = torch.where(usable, torch.zeros_like(age_intervals), age_intervals * self.interval_ms)
+        return vehicle_observation(
+            self.platoon, content, switch.float() * self.subframe_ms, age_ms, self.params.platoon
+        )
+
+    def leader_accel_mps2(self, intervals: torch.Tensor) -> torch.Tensor:
+        """Leader acceleration (m/s²) in the given intervals, ``intervals`` [B, ...] → same shape."""
+        last = self.leader_speed_mps.shape[1] - 2
+        k = intervals.clamp(0, last)
+        flat = k.reshape(self.batch_size, -1)
+        v = self.leader_speed_mps
+        accel = (v.gather(1, flat + 1) - v.gather(1, flat)) / self.params.platoon.control_interval_s
+        return accel.reshape(intervals.shape)
+
+    def finish_interval(self, commands_mps2: torch.Tensor, perfect: bool) -> IntervalRecord:
+        """Integrate the platoon over the interval and pay the control reward.
+
+        ``commands_mps2`` [B, F] are the followers' decisions u_k (clipped to the actuator
+        bounds). With radio, all T subframes must have run. The twin does not start the next
+        interval: call :meth:`begin_interval` (or :meth:`reset` for finished scenarios).
+        """
+        t = self.subframes_per_interval
+        if self.radio_enabled and not perfect and self.subframe != t:
+            raise RuntimeError(f"finish_interval after {self.subframe} of {t} subframes; run all {t} first")
+        expected = (self.batch_size, self.num_followers)
+        if tuple(commands_mps2.shape) != expected:
+            raise ValueError(f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}")
+        pp = self.params.platoon
+        switch = self.switch_subframe(perfect)
+        before = self.platoon
+        u = commands_mps2.to(device=self.device, dtype=torch.float32).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
+        after = self.integrator.integrate(before, self.leader_accel_mps2(self.interval), u, switch)
+        gap_error, speed_error = spacing_errors(after, pp)
+        reward = control_reward(gap_error, speed_error, u, before.command_mps2[:, 1:], pp)
+        collided = gaps_m(after.position_m, pp) <= 0
+        reward = reward + collided.float() * pp.collision_penalty
+
+        if self.radio_enabled:
+            delay = self._delivery_subframes()
+            mean_rate = torch.as_tensor(self._v2i_rate_sum, device=self.device) / max(self.subframe, 1)
+            delivered = delay <= t
+            self.cam_held = torch.where(delivered[..., None], self.cam_snapshot, self.cam_held)
+            self.cam_held_interval = torch.where(delivered, self.interval[:, None], self.cam_held_interval)
+        else:
+            delay = torch.zeros_like(switch)
+            mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+        record = IntervalRecord(
+            interval=self.interval.clone(),
+            state_before=before,
+            state_after=after,
+            command_mps2=u,
+            switch_subframe=switch,
+            reward=reward,
+            gap_error_m=gap_error,
+            speed_error_mps=speed_error,
+            collided=collided,
+            truncated=self.interval + 1 >= self.params.episode_intervals,
+            cam_delay_subframes=delay,
+            v2i_rate_bps=mean_rate,
+        )
+        self.platoon = after
+        self.interval = self.interval + 1
+        return record
