@@ -104,6 +104,7 @@ class SubframeOutcome:
     v2v_bits: Array  # [B, L] bits delivered in this subframe
     v2v_power_mw: Array  # [B, L] transmit power actually used (0 when silent)
     delivered_now: Array  # [B, L] bool: the CAM's last bit arrived in this subframe
+    was_pending: Array  # [B, L] bool: the CAM still had bits to send at the subframe start
 
 
 def large_scale_gains_db(
@@ -250,7 +251,7 @@ def subframe_step(
     delivered_now = pending & (state.remaining_bits <= 0)
     state.delay_subframes = xp.where(delivered_now, subframe + 1, state.delay_subframes)
     state.occupancy = tx_onehot.sum(axis=1)
-    return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now)
+    return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
 
 
 def gain_feature(linear: torch.Tensor, reference_mw: float) -> torch.Tensor:

@@ -1,0 +1,184 @@
+"""What every VDTN PettingZoo environment shares: twin construction, spaces, action checks.
+
+The environments are thin: they translate between PettingZoo's dicts and the twin's tensors
+(``B = 1``); all physics lives in :mod:`vdtn_marl.sim`.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import gymnasium
+import numpy as np
+import torch
+from pettingzoo import ParallelEnv
+
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.sim.link import RRA_OBS_GAIN_CLIP
+from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.platoon import vehicle_observation_bounds
+from vdtn_marl.sim.twin import RRA_CONTROL_CLIP, DigitalTwin, IntervalRecord
+
+RENDER_MODES = ("rgb_array",)
+
+
+def vehicle_name(follower: int) -> str:
+    """Agent name of follower ``follower`` (1-based)."""
+    return f"vehicle_{follower}"
+
+
+def rra_name(link_index: int) -> str:
+    """Agent name of the RRA agent of V2V link ``link_index`` (1-based: link i feeds follower i)."""
+    return f"rra_{link_index}"
+
+
+def vehicle_observation_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
+    low, high = vehicle_observation_bounds(twin.params.platoon)
+    return gymnasium.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
+
+
+def vehicle_action_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
+    pp = twin.params.platoon
+    return gymnasium.spaces.Box(pp.accel_min_mps2, pp.accel_max_mps2, shape=(1,), dtype=np.float32)
+
+
+def rra_observation_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
+    """Bounds of the RRA features (docs/model.md §4.6)."""
+    m = twin.num_subchannels
+    low = np.concatenate(
+        [np.full(3 * m, RRA_OBS_GAIN_CLIP[0]), np.zeros(m + 2), np.full(4, -RRA_CONTROL_CLIP)]
+    ).astype(np.float32)
+    high = np.concatenate(
+        [np.full(3 * m, RRA_OBS_GAIN_CLIP[1]), np.ones(m + 2), np.full(4, RRA_CONTROL_CLIP)]
+    ).astype(np.float32)
+    return gymnasium.spaces.Box(low, high, dtype=np.float32)
+
+
+def rra_action_space(twin: DigitalTwin) -> gymnasium.spaces.Discrete:
+    return gymnasium.spaces.Discrete(twin.params.radio.num_actions)
+
+
+def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
+    """κ1, κ2 ∈ [0, 1] with κ1 + κ2 = 1; κ2 defaults to 1 − κ1."""
+    if not (isinstance(kappa1, int | float) and 0.0 <= kappa1 <= 1.0):
+        raise ConfigError(f"kappa1={kappa1!r} is outside the allowed range [0, 1]")
+    if kappa2 is None:
+        kappa2 = 1.0 - kappa1
+    if not (isinstance(kappa2, int | float) and 0.0 <= kappa2 <= 1.0):
+        raise ConfigError(f"kappa2={kappa2!r} is outside the allowed range [0, 1]")
+    if not math.isclose(kappa1 + kappa2, 1.0, abs_tol=1e-9):
+        raise ConfigError(f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})")
+    return float(kappa1), float(kappa2)
+
+
+class VDTNParallelEnv(ParallelEnv):
+    """Common plumbing of the four environments (one scenario, B = 1).
+
+    Model parameters are keyword arguments (any field of
+    :class:`~vdtn_marl.sim.params.PlatoonParams` / ``RadioParams``, plus ``episode_intervals``
+    and ``traces``), e.g. ``make("vdtn/platoon-control-v0", num_vehicles=6)``.
+    """
+
+    metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20, "is_parallelizable": True}
+
+    def __init__(
+        self,
+        *,
+        radio: bool,
+        seed: int | None = None,
+        render_mode: str | None = None,
+        device: str = "cpu",
+        trace_source: TraceSource | None = None,
+        **model_kwargs,
+    ):
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ConfigError(f"render_mode={render_mode!r} must be None or one of {RENDER_MODES}")
+        self.render_mode = render_mode
+        params = TwinParams.from_overrides(**model_kwargs)
+        backend = "numpy" if torch.device(device).type == "cpu" else "torch"
+        self.twin = DigitalTwin(
+            params, batch_size=1, device=device, seed=seed, trace_source=trace_source,
+            radio=radio, backend=backend,
+        )
+        self._numpy = backend == "numpy"
+        self.last_record: IntervalRecord | None = None
+
+    # -- spaces (cached: PettingZoo requires the same object on every call)
+    @functools.lru_cache(maxsize=None)  # noqa: B019 - one cache entry per (env, agent), by design
+    def observation_space(self, agent: str) -> gymnasium.spaces.Space:
+        return self._observation_space(self._check_agent(agent))
+
+    @functools.lru_cache(maxsize=None)  # noqa: B019
+    def action_space(self, agent: str) -> gymnasium.spaces.Space:
+        return self._action_space(self._check_agent(agent))
+
+    def _check_agent(self, agent: str) -> str:
+        if agent not in self.possible_agents:
+            raise KeyError(f"unknown agent {agent!r}; agents are {self.possible_agents}")
+        return agent
+
+    def _check_action_keys(self, actions: dict) -> None:
+        unknown = set(actions) - set(self.possible_agents)
+        if unknown:
+            raise KeyError(f"unknown agent(s) {sorted(unknown)} in actions; agents are {self.possible_agents}")
+
+    def _vehicle_commands(self, actions: dict, names: list[str]) -> np.ndarray:
+        """Acceleration commands [F] (m/s²) from a dict of Box(1) actions, validated."""
+        pp = self.twin.params.platoon
+        missing = [n for n in names if n not in actions]
+        if missing:
+            raise KeyError(f"missing actions for {missing}")
+        out = np.empty(len(names), np.float32)
+        for i, name in enumerate(names):
+            value = np.asarray(actions[name], dtype=np.float64)
+            if value.shape not in ((1,), ()):
+                raise ValueError(f"action of {name} has shape {value.shape}, expected (1,)")
+            u = float(value.reshape(()))
+            if not (pp.accel_min_mps2 <= u <= pp.accel_max_mps2):  # also rejects NaN
+                raise ValueError(
+                    f"action of {name} = {u!r} m/s² is outside [{pp.accel_min_mps2}, {pp.accel_max_mps2}]"
+                )
+            out[i] = u
+        return out
+
+    def _rra_actions(self, actions: dict, names: list[str]) -> np.ndarray:
+        """RRA actions [1, L] (ints) from a dict of Discrete actions, validated."""
+        n_act = self.twin.params.radio.num_actions
+        missing = [n for n in names if n not in actions]
+        if missing:
+            raise KeyError(f"missing actions for {missing}")
+        out = np.empty((1, len(names)), np.int64)
+        for i, name in enumerate(names):
+            value = np.asarray(actions[name])
+            if value.shape not in ((), (1,)) or value.dtype.kind not in "iu":
+                raise ValueError(
+                    f"action of {name} = {actions[name]!r} must be one integer in [0, {n_act - 1}]"
+                )
+            a = int(value.reshape(()))
+            if not 0 <= a < n_act:
+                raise ValueError(f"action of {name} = {a} is outside [0, {n_act - 1}]")
+            out[0, i] = a
+        return out
+
+    def _to_twin(self, array: np.ndarray) -> np.ndarray | torch.Tensor:
+        return array if self._numpy else torch.as_tensor(array, device=self.twin.device)
+
+    @staticmethod
+    def _as_numpy(x) -> np.ndarray:
+        return x if isinstance(x, np.ndarray) else x.detach().cpu().numpy()
+
+    def render(self):
+        if self.render_mode != "rgb_array":
+            return None
+        from vdtn_marl.envs.render import render_twin
+
+        return render_twin(self.twin, self.last_record)
+
+    def close(self):
+        pass
+
+    def state(self) -> np.ndarray:
+        """Global state: positions (m), speeds (m/s), accelerations (m/s²) of all vehicles."""
+        st = self.twin.platoon
+        return torch.cat([st.position_m[0], st.speed_mps[0], st.accel_mps2[0]]).cpu().numpy()

@@ -1,0 +1,136 @@
+"""Platoon control environments: ``vdtn/platoon-control-v0`` and ``-impaired-v0``.
+
+One step is one control interval (Δt = 50 ms). Agents ``vehicle_1..vehicle_{N−1}``.
+
+=================  ==========================================================================
+observation        Box(8) float32: gap error (m), speed error (m/s), own acceleration (m/s²),
+                   predecessor's acceleration and command from the CAM (m/s²), CAM delay
+                   (ms: when the command takes force, 0..T), CAM age (ms, at the interval
+                   start), previous own command (m/s²). docs/model.md §2.4
+action             Box(1) float32 in [u_min, u_max] m/s²: the acceleration command u_k.
+                   NaN or out-of-range values raise.
+reward             per follower: −(|e_p|/ê_p + α|e_v|/ê_v + β|u|/u_max + γ_j|jerk|/j_max);
+                   collision penalty on the colliding follower. docs/model.md §2.3
+start state        followers at the desired gap and the leader's initial speed, a = 0
+termination        any gap ≤ 0 (collision) ends the episode for every agent
+truncation         after ``episode_intervals`` intervals (default 400 = 20 s)
+=================  ==========================================================================
+
+With ``impaired=True`` every interval's CAMs cross the C-V2X link layer, driven by
+``rra_policy`` (a callable: RRA observations [1, L, D] → integer actions [1, L]; random by
+default), before the followers decide: late CAMs delay the command switch, lost ones leave the
+follower with older CAM content (docs/model.md §4.5). Without it, observation is perfect.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from vdtn_marl.envs.base import (
+    VDTNParallelEnv,
+    vehicle_action_space,
+    vehicle_name,
+    vehicle_observation_space,
+)
+from vdtn_marl.envs.policies import RandomRRAPolicy
+
+
+def interval_infos(record, names: list[str], interval_ms: float, subframe_ms: float) -> dict:
+    """Per-follower diagnostics of one interval (shared by the env faces)."""
+    t_sub = record.cam_delay_subframes[0].tolist()
+    switch = record.switch_subframe[0].tolist()
+    gap = record.gap_error_m[0].tolist()
+    speed = record.speed_error_mps[0].tolist()
+    command = record.command_mps2[0].tolist()
+    collided = record.collided[0].tolist()
+    limit = round(interval_ms / subframe_ms)
+    return {
+        name: {
+            "gap_error_m": gap[i],
+            "speed_error_mps": speed[i],
+            "command_mps2": command[i],
+            "switch_ms": switch[i] * subframe_ms,
+            "cam_delivered": t_sub[i] <= limit,
+            "cam_delay_ms": t_sub[i] * subframe_ms if t_sub[i] <= limit else -1.0,
+            "collided": collided[i],
+        }
+        for i, name in enumerate(names)
+    }
+
+
+class PlatoonControlEnv(VDTNParallelEnv):
+    """Followers' longitudinal control; perfect or link-impaired observation (see module doc)."""
+
+    def __init__(
+        self,
+        impaired: bool = False,
+        rra_policy: Callable | None = None,
+        seed: int | None = None,
+        render_mode: str | None = None,
+        device: str = "cpu",
+        **model_kwargs,
+    ):
+        super().__init__(radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs)
+        self.impaired = impaired
+        self.metadata = {**self.metadata, "name": "platoon_control_impaired_v0" if impaired else "platoon_control_v0"}
+        self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
+        self.agents: list[str] = []
+        self.rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
+        if not callable(self.rra_policy):
+            raise TypeError(f"rra_policy={rra_policy!r} must be callable: observations [1, L, D] -> actions [1, L]")
+
+    def _observation_space(self, agent):
+        return vehicle_observation_space(self.twin)
+
+    def _action_space(self, agent):
+        return vehicle_action_space(self.twin)
+
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        self.twin.reset(seed=seed)
+        if seed is not None and hasattr(self.rra_policy, "seed"):
+            self.rra_policy.seed(seed)
+        self.agents = self.possible_agents[:]
+        self.last_record = None
+        if self.impaired:
+            self._run_radio()
+        return self._observations(), {a: {} for a in self.agents}
+
+    def _run_radio(self) -> None:
+        twin = self.twin
+        for _ in range(twin.subframes_per_interval):
+            twin.step_subframe(self.rra_policy(twin.rra_observation()))
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        obs = self.twin.vehicle_observation(perfect=not self.impaired)[0].cpu().numpy()
+        return {name: obs[i] for i, name in enumerate(self.possible_agents)}
+
+    def step(self, actions: dict):
+        self._check_action_keys(actions)
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        commands = self._vehicle_commands(actions, self.agents)
+        record = self.twin.finish_interval(
+            torch.as_tensor(commands, device=self.twin.device)[None], perfect=not self.impaired
+        )
+        self.last_record = record
+        terminated = bool(record.collided.any())
+        truncated = bool(record.truncated[0]) and not terminated
+        if not (terminated or truncated):
+            self.twin.begin_interval()
+            if self.impaired:
+                self._run_radio()
+        rewards = record.reward[0].tolist()
+        names = self.agents
+        infos = interval_infos(record, names, self.twin.interval_ms, self.twin.subframe_ms)
+        obs = self._observations()
+        self.agents = [] if (terminated or truncated) else names
+        return (
+            obs,
+            {n: rewards[i] for i, n in enumerate(names)},
+            dict.fromkeys(names, terminated),
+            dict.fromkeys(names, truncated),
+            infos,
+        )

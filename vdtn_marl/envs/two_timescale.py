@@ -1,0 +1,193 @@
+"""The two-timescale wrapper: ``vdtn/vdtn-joint-v0`` (and the base of ``vdtn/v2x-rra-v0``).
+
+One ``step()`` is one 1 ms subframe; ``t = step mod T`` (T = 50). Every agent has a clock:
+
+=============  =======  =====================================================================
+agent          period   acts at
+=============  =======  =====================================================================
+``rra_i``      1        every step: sub-channel × power of V2V link i (vehicle i−1 → i),
+                        Discrete(M·P). docs/model.md §4.4
+``vehicle_i``  T        the step with t = T−1, which closes interval k: its command u_k,
+                        Box(1) m/s². Its observation is emitted at the step before (after
+                        the CAM's delivery deadline, docs/model.md §4.5) and only changes then.
+=============  =======  =====================================================================
+
+``infos[agent]["acts"]`` is True when the agent's action is read at the next step; off-tick
+vehicle actions may be omitted and are ignored. All agents stay in ``env.agents`` for the whole
+episode. At the step that closes interval k the twin integrates the platoon (u_k takes force at
+the CAM's delivery subframe), the vehicles get their interval reward, the VoI estimator
+computes ξ_i for every follower, and ``rra_i`` gets κ2·s_ξ·ξ_i on top of its κ1·s_g·g term;
+``infos["rra_i"]["ivoi"]`` reports ξ_i at that step (docs/model.md §5).
+
+With ``vehicles_are_agents=False`` the followers are driven by ``control_module`` (a callable:
+impaired observations [1, F, 8] torch → commands [1, F]; linear CACC by default), which is
+:class:`~vdtn_marl.envs.radio.V2XRRAEnv`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import torch
+
+from vdtn_marl.envs.base import (
+    VDTNParallelEnv,
+    rra_action_space,
+    rra_name,
+    rra_observation_space,
+    vehicle_action_space,
+    vehicle_name,
+    vehicle_observation_space,
+)
+from vdtn_marl.envs.control import interval_infos
+from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+
+
+class TwoTimescaleEnv(VDTNParallelEnv):
+    """Vehicles (every control interval) and RRA agents (every subframe) on one clock."""
+
+    def __init__(
+        self,
+        kappa1: float = 0.5,
+        kappa2: float | None = None,
+        reward: str = "jocc",
+        ivoi_estimator: str | IVoIEstimator = "rollout",
+        ivoi_horizon_intervals: int = 10,
+        throughput_scale: float = 0.004,
+        ivoi_scale: float = 20.0,
+        miss_penalty: float = 1.0,
+        vehicles_are_agents: bool = True,
+        control_module: Callable | None = None,
+        seed: int | None = None,
+        render_mode: str | None = None,
+        device: str = "cpu",
+        **model_kwargs,
+    ):
+        self.reward_fn = RRAReward(reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty)
+        super().__init__(radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs)
+        twin = self.twin
+        estimator_kwargs = {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
+        self.ivoi_estimator = make_ivoi_estimator(
+            ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
+        )
+        self.vehicles_are_agents = vehicles_are_agents
+        self.control_module = control_module or CACCController(twin.params.platoon)
+        if not callable(self.control_module):
+            raise TypeError(f"control_module={control_module!r} must be callable: observations -> commands")
+        self.vehicle_agents = [vehicle_name(i + 1) for i in range(twin.num_followers)]
+        self.rra_agents = [rra_name(i + 1) for i in range(twin.num_links)]
+        self.possible_agents = (self.vehicle_agents if vehicles_are_agents else []) + self.rra_agents
+        self.agents: list[str] = []
+        self.metadata = {**self.metadata, "name": "vdtn_joint_v0" if vehicles_are_agents else "v2x_rra_v0"}
+        self._period = {a: twin.subframes_per_interval for a in self.vehicle_agents} | dict.fromkeys(
+            self.rra_agents, 1
+        )
+        self._bandwidth_hz = twin.params.radio.subchannel_bandwidth_hz
+        self._subframe_s = twin.params.platoon.subframe_s
+
+    # -- clocks
+    def clock_period(self, agent: str) -> int:
+        """Subframes between two actions of ``agent``: 1 for ``rra_*``, T for ``vehicle_*``."""
+        return self._period[self._check_agent(agent)]
+
+    def _vehicle_tick_next(self) -> bool:
+        return self.twin.subframe == self.twin.subframes_per_interval - 1
+
+    def _observation_space(self, agent):
+        return vehicle_observation_space(self.twin) if agent.startswith("vehicle_") else rra_observation_space(self.twin)
+
+    def _action_space(self, agent):
+        return vehicle_action_space(self.twin) if agent.startswith("vehicle_") else rra_action_space(self.twin)
+
+    # -- API
+    def reset(self, seed: int | None = None, options: dict | None = None):
+        self.twin.reset(seed=seed)
+        self.agents = self.possible_agents[:]
+        self.last_record = None
+        self._refresh_vehicle_obs()
+        return self._observations(), self._infos(closing=None, ivoi=None)
+
+    def _refresh_vehicle_obs(self) -> None:
+        if self.vehicles_are_agents:
+            obs = self.twin.vehicle_observation(perfect=False)[0].cpu().numpy()
+            self._vehicle_obs = {name: obs[i] for i, name in enumerate(self.vehicle_agents)}
+
+    def _observations(self) -> dict[str, np.ndarray]:
+        rra = self._as_numpy(self.twin.rra_observation())[0].copy()
+        out = {name: rra[i] for i, name in enumerate(self.rra_agents)}
+        if self.vehicles_are_agents:
+            out.update(self._vehicle_obs)
+        return out
+
+    def _infos(self, closing, ivoi) -> dict[str, dict]:
+        vehicle_acts = self._vehicle_tick_next()
+        infos = {name: {"acts": True} for name in self.rra_agents}
+        if self.vehicles_are_agents:
+            infos.update({name: {"acts": vehicle_acts} for name in self.vehicle_agents})
+        if closing is not None:
+            for i, name in enumerate(self.rra_agents):
+                infos[name]["ivoi"] = ivoi[i]
+                infos[name]["cam_delivered"] = closing[self.vehicle_agents[i]]["cam_delivered"]
+                infos[name]["cam_delay_ms"] = closing[self.vehicle_agents[i]]["cam_delay_ms"]
+            if self.vehicles_are_agents:
+                for name in self.vehicle_agents:
+                    infos[name].update(closing[name])
+        return infos
+
+    def step(self, actions: dict):
+        self._check_action_keys(actions)
+        if not self.agents:
+            raise RuntimeError("step() called on a finished episode; call reset() first")
+        twin = self.twin
+        closes_interval = twin.subframe == twin.subframes_per_interval - 1
+        rra_actions = self._rra_actions(actions, self.rra_agents)
+        commands = None
+        if closes_interval and self.vehicles_are_agents:
+            commands = torch.as_tensor(self._vehicle_commands(actions, self.vehicle_agents))[None]
+
+        outcome = twin.step_subframe(self._to_twin(rra_actions))
+        rra_reward = self._as_numpy(
+            self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
+        )[0].astype(np.float64)
+        throughput_mbps = float(self._as_numpy(self.reward_fn.v2i_throughput_mbps(outcome))[0])
+        vehicle_reward = [0.0] * twin.num_followers
+        terminated = truncated = False
+        closing = ivoi = None
+        if closes_interval:
+            if commands is None:
+                commands = self.control_module(twin.vehicle_observation(perfect=False))
+            record = twin.finish_interval(commands, perfect=False)
+            self.last_record = record
+            xi = self.ivoi_estimator(twin, record)
+            lost = record.cam_delay_subframes > twin.subframes_per_interval
+            rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost)[0].cpu().numpy()
+            ivoi = xi[0].tolist()
+            vehicle_reward = record.reward[0].tolist()
+            closing = interval_infos(record, self.vehicle_agents, twin.interval_ms, twin.subframe_ms)
+            terminated = bool(record.collided.any())
+            truncated = bool(record.truncated[0]) and not terminated
+            if not (terminated or truncated):
+                twin.begin_interval()
+        if self._vehicle_tick_next():
+            self._refresh_vehicle_obs()
+
+        names = self.agents
+        rewards = {name: float(rra_reward[i]) for i, name in enumerate(self.rra_agents)}
+        if self.vehicles_are_agents:
+            rewards.update({name: vehicle_reward[i] for i, name in enumerate(self.vehicle_agents)})
+        infos = self._infos(closing, ivoi)
+        for name in self.rra_agents:
+            infos[name]["v2i_throughput_mbps"] = throughput_mbps
+        obs = self._observations()
+        if terminated or truncated:
+            self.agents = []
+        return (
+            obs,
+            rewards,
+            dict.fromkeys(names, terminated),
+            dict.fromkeys(names, truncated),
+            infos,
+        )
