@@ -38,8 +38,23 @@ from vdtn_marl.envs.base import (
 from vdtn_marl.envs.policies import RandomRRAPolicy
 
 
+#: Per-follower info before the first interval closes (same keys and types as interval_infos).
+INITIAL_INTERVAL_INFO = {
+    "gap_error_m": 0.0,
+    "speed_error_mps": 0.0,
+    "command_mps2": 0.0,
+    "switch_ms": 0.0,
+    "cam_delivered": True,
+    "cam_delay_ms": 0.0,
+    "collided": False,
+}
+
+
 def interval_infos(record, names: list[str], interval_ms: float, subframe_ms: float) -> dict:
-    """Per-follower diagnostics of one interval (shared by the env faces)."""
+    """Per-follower diagnostics of one interval (keys of :data:`INITIAL_INTERVAL_INFO`).
+
+    ``cam_delay_ms`` is the CAM's delivery time, −1 when it was lost.
+    """
     t_sub = record.cam_delay_subframes[0].tolist()
     switch = record.switch_subframe[0].tolist()
     gap = record.gap_error_m[0].tolist()
@@ -96,7 +111,7 @@ class PlatoonControlEnv(VDTNParallelEnv):
         self.last_record = None
         if self.impaired:
             self._run_radio()
-        return self._observations(), {a: {} for a in self.agents}
+        return self._observations(), {a: dict(INITIAL_INTERVAL_INFO) for a in self.agents}
 
     def _run_radio(self) -> None:
         twin = self.twin

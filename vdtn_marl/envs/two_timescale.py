@@ -40,7 +40,7 @@ from vdtn_marl.envs.base import (
     vehicle_name,
     vehicle_observation_space,
 )
-from vdtn_marl.envs.control import interval_infos
+from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
@@ -108,7 +108,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         self.agents = self.possible_agents[:]
         self.last_record = None
         self._refresh_vehicle_obs()
-        return self._observations(), self._infos(closing=None, ivoi=None)
+        self._last_closing = dict.fromkeys(self.vehicle_agents, INITIAL_INTERVAL_INFO)
+        return self._observations(), self._infos(closing=None, ivoi=None, throughput_mbps=0.0)
 
     def _refresh_vehicle_obs(self) -> None:
         if self.vehicles_are_agents:
@@ -122,19 +123,31 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             out.update(self._vehicle_obs)
         return out
 
-    def _infos(self, closing, ivoi) -> dict[str, dict]:
-        vehicle_acts = self._vehicle_tick_next()
-        infos = {name: {"acts": True} for name in self.rra_agents}
-        if self.vehicles_are_agents:
-            infos.update({name: {"acts": vehicle_acts} for name in self.vehicle_agents})
+    def _infos(self, closing, ivoi, throughput_mbps: float) -> dict[str, dict]:
+        """Same keys at every step (TorchRL's PettingZooWrapper builds its spec at reset).
+
+        ``rra_i``: ``acts``, ``v2i_throughput_mbps`` (this subframe), ``closes_interval``,
+        ``ivoi`` (ξ_i at the closing step, 0 otherwise) and the CAM outcome of link i's last
+        finished interval. ``vehicle_i``: ``acts`` and the diagnostics of its last interval.
+        """
         if closing is not None:
-            for i, name in enumerate(self.rra_agents):
-                infos[name]["ivoi"] = ivoi[i]
-                infos[name]["cam_delivered"] = closing[self.vehicle_agents[i]]["cam_delivered"]
-                infos[name]["cam_delay_ms"] = closing[self.vehicle_agents[i]]["cam_delay_ms"]
-            if self.vehicles_are_agents:
-                for name in self.vehicle_agents:
-                    infos[name].update(closing[name])
+            self._last_closing = closing
+        last = self._last_closing
+        vehicle_acts = self._vehicle_tick_next()
+        infos = {}
+        for i, name in enumerate(self.rra_agents):
+            recipient = last[self.vehicle_agents[i]]
+            infos[name] = {
+                "acts": True,
+                "v2i_throughput_mbps": throughput_mbps,
+                "closes_interval": closing is not None,
+                "ivoi": ivoi[i] if ivoi is not None else 0.0,
+                "cam_delivered": recipient["cam_delivered"],
+                "cam_delay_ms": recipient["cam_delay_ms"],
+            }
+        if self.vehicles_are_agents:
+            for name in self.vehicle_agents:
+                infos[name] = {"acts": vehicle_acts, **last[name]}
         return infos
 
     def step(self, actions: dict):
@@ -178,9 +191,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         rewards = {name: float(rra_reward[i]) for i, name in enumerate(self.rra_agents)}
         if self.vehicles_are_agents:
             rewards.update({name: vehicle_reward[i] for i, name in enumerate(self.vehicle_agents)})
-        infos = self._infos(closing, ivoi)
-        for name in self.rra_agents:
-            infos[name]["v2i_throughput_mbps"] = throughput_mbps
+        infos = self._infos(closing, ivoi, throughput_mbps)
         obs = self._observations()
         if terminated or truncated:
             self.agents = []

@@ -1,0 +1,277 @@
+"""Physics of the twin against hand-computed values (docs/model.md §2, §4)."""
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from vdtn_marl.sim import channel, link
+from vdtn_marl.sim.params import ConfigError, PlatoonParams, RadioParams, TwinParams
+from vdtn_marl.sim.platoon import IntervalIntegrator, PlatoonState, spacing_errors
+from vdtn_marl.sim.twin import DigitalTwin
+
+RADIO = RadioParams()
+
+
+def test_v2i_pathloss_at_known_distances():
+    d = torch.tensor([1000.0, 500.0, 2000.0])
+    # 128.1 + 37.6·log10(d/km): 128.1, 128.1 − 11.3184, 128.1 + 11.3184
+    expected = torch.tensor([128.1, 116.7816, 139.4184])
+    assert torch.allclose(channel.v2i_pathloss_db(d), expected, atol=1e-3)
+
+
+def test_v2v_pathloss_below_and_beyond_breakpoint():
+    # f = 2 GHz, h = 1.5 m: d_bp = 4·0.5·0.5·2e9/3e8 = 6.667 m
+    d = torch.tensor([1.0, 5.0, 100.0])
+    expected = torch.tensor(
+        [
+            22.7 * math.log10(3.0) + 41 + 20 * math.log10(0.4),  # clamped to 3 m: 43.871
+            22.7 * math.log10(5.0) + 41 + 20 * math.log10(0.4),  # 48.907
+            40 * 2 + 9.45 - 34.6 * math.log10(1.5) + 2.7 * math.log10(0.4),  # 82.283
+        ]
+    )
+    assert torch.allclose(channel.v2v_pathloss_db(d, RADIO), expected, atol=1e-3)
+    assert expected[1] == pytest.approx(48.907, abs=1e-3)
+
+
+def test_noise_power_for_180_khz():
+    assert RADIO.noise_power_dbm == pytest.approx(-121.447, abs=1e-3)
+    assert RadioParams(subchannel_bandwidth_hz=1e6).noise_power_dbm == pytest.approx(-114.0)
+
+
+def test_serving_bs_is_nearest():
+    x = torch.tensor([0.0, 900.0, -900.0, 2600.0])
+    bs = channel.serving_bs_x_m(x, torch.zeros(4), RADIO)
+    assert bs.tolist() == [0.0, 1732.0, -1732.0, 3464.0]
+
+
+def _tables(own, v2i_rx, to_bs, cross, v2i_sig):
+    as_t = lambda v: torch.tensor(v, dtype=torch.float32)[None, None]  # noqa: E731  [T=1, B=1, ...]
+    return link.IntervalTables(as_t(own), as_t(v2i_rx), as_t(to_bs), as_t(cross), as_t(v2i_sig))
+
+
+def _two_link_setup(radio):
+    const = link.KernelConstants.build(radio, 1e-3, batch=1, links=2, device="cpu")
+    decode = link.ActionTables.build(radio, torch.device("cpu"))
+    return const, decode
+
+
+def test_sinr_and_rate_two_link_toy_case():
+    radio = RadioParams(num_subchannels=2)
+    const, decode = _two_link_setup(radio)
+    n = const.noise_mw
+    tables = _tables(
+        own=[[1e-4, 1e-4], [2e-4, 2e-4]],
+        v2i_rx=[[1e-12, 3e-12], [5e-12, 7e-12]],
+        to_bs=[[1e-12, 1e-12], [2e-12, 2e-12]],
+        cross=[[0.0, 1e-6], [3e-6, 0.0]],
+        v2i_sig=[4e-10, 6e-10],
+    )
+    state = link.new_link_state(1, 2, 2, radio, 1, "cpu")
+    p = 10 ** 2.3  # 23 dBm in mW
+    # both links on sub-channel 0 at 23 dBm (action 0)
+    out = link.subframe_step(tables, 0, torch.tensor([[0, 0]]), state, decode, const)
+    sinr1 = p * 1e-4 / (n + 1e-12 + p * 1e-6)
+    sinr2 = p * 2e-4 / (n + 5e-12 + p * 3e-6)
+    bits = [180e3 * 1e-3 * math.log2(1 + s) for s in (sinr1, sinr2)]
+    assert out.v2v_bits[0].tolist() == pytest.approx(bits, rel=1e-5)
+    v2i_sinr = [4e-10 / (n + p * 1e-12 + p * 2e-12), 6e-10 / n]
+    rates = [180e3 * math.log2(1 + s) for s in v2i_sinr]
+    assert out.v2i_rate_bps[0].tolist() == pytest.approx(rates, rel=1e-5)
+
+
+def test_same_kernel_on_numpy_and_torch():
+    radio = RadioParams(num_subchannels=2)
+    const, decode = _two_link_setup(radio)
+    tables = _tables(
+        own=[[1e-4, 3e-4], [2e-4, 5e-5]], v2i_rx=[[1e-11, 3e-12], [5e-12, 7e-11]],
+        to_bs=[[1e-12, 4e-12], [2e-12, 2e-12]], cross=[[0.0, 1e-6], [3e-6, 0.0]], v2i_sig=[4e-10, 6e-10],
+    )
+    actions = torch.tensor([[1, 5]])  # link 1: ch 0 at 15 dBm; link 2: ch 1 at 15 dBm
+    out_t = link.subframe_step(tables, 0, actions, link.new_link_state(1, 2, 2, radio, 1, "cpu"), decode, const)
+    state_np = link.new_link_state(1, 2, 2, radio, 1, "cpu").numpy()
+    out_n = link.subframe_step(tables.numpy(), 0, actions.numpy(), state_np, decode.numpy(), const.numpy())
+    np.testing.assert_allclose(out_n.v2v_bits, out_t.v2v_bits.numpy(), rtol=1e-6)
+    np.testing.assert_allclose(out_n.v2i_rate_bps, out_t.v2i_rate_bps.numpy(), rtol=1e-6)
+
+
+def test_cam_delivery_subframe_for_fixed_rate():
+    # SINR = 3 ⇒ log2(4) = 2 bit/s/Hz ⇒ 360 bits per 1 ms subframe ⇒ 14,400 bits in 40 subframes
+    radio = RadioParams(num_subchannels=2)
+    const, decode = _two_link_setup(radio)
+    p = 10 ** 2.3
+    gain = 3 * const.noise_mw / p
+    t = 50
+    tables = link.IntervalTables(
+        torch.full((t, 1, 2, 2), gain), torch.zeros(t, 1, 2, 2), torch.zeros(t, 1, 2, 2),
+        torch.zeros(t, 1, 2, 2), torch.full((t, 1, 2), 1e-9),
+    )
+    state = link.new_link_state(1, 2, 2, radio, t, "cpu")
+    off = radio.num_power_levels - 1
+    actions = torch.tensor([[0, off]])  # link 1 at 23 dBm, link 2 silent
+    for s in range(t):
+        out = link.subframe_step(tables, s, actions, state, decode, const)
+        if s == 39:
+            assert bool(out.delivered_now[0, 0])
+        if s == 40:
+            assert float(out.v2v_power_mw[0, 0]) == 0.0  # delivered ⇒ silent
+    assert state.delay_subframes[0].tolist() == [40, t + 1]
+
+
+def _state(pos, speed, accel, command):
+    as_t = lambda v: torch.tensor([v], dtype=torch.float32)  # noqa: E731
+    return PlatoonState(as_t(pos), as_t(speed), as_t(accel), as_t(command))
+
+
+def _error_coordinates(state, params):
+    e_p, e_v = spacing_errors(state, params)
+    return torch.stack([e_p, e_v, state.accel_mps2[:, 1:]], -1)
+
+
+def test_error_coordinate_matrices_match_integrator_for_single_subframe():
+    params = PlatoonParams(subframes_per_interval=1)
+    dt, h, tau = params.control_interval_s, params.time_headway_s, params.driveline_lag_s
+    a_mat = torch.tensor([[1, dt, -h * dt], [0, 1, -dt], [0, 0, 1 - dt / tau]])
+    b_vec = torch.tensor([0, 0, dt / tau])
+    c_vec = torch.tensor([0, dt, 0])
+    state = _state([0.0, -9.0, -17.5], [25.0, 24.0, 24.6], [0.0, 0.4, -0.3], [0.0, 0.1, -0.2])
+    leader_accel, u = torch.tensor([0.8]), torch.tensor([[1.2, -0.7]])
+    after = IntervalIntegrator(params, "cpu").integrate(state, leader_accel, u, torch.zeros(1, 2, dtype=torch.long))
+    x, x_next = _error_coordinates(state, params)[0], _error_coordinates(after, params)[0]
+    pred_accel = torch.stack([leader_accel[0], state.accel_mps2[0, 1]])
+    expected = x @ a_mat.T + u[0, :, None] * b_vec + pred_accel[:, None] * c_vec
+    assert torch.allclose(x_next, expected, atol=1e-5)
+
+
+def test_per_subframe_integration_agrees_with_matrices_to_first_order():
+    """Discrepancy to the interval-level Euler map shrinks ~Δt² when Δt halves."""
+
+    def discrepancy(interval_s):
+        params = PlatoonParams(control_interval_s=interval_s, subframes_per_interval=round(interval_s / 1e-3))
+        dt, h, tau = interval_s, params.time_headway_s, params.driveline_lag_s
+        a_mat = torch.tensor([[1, dt, -h * dt], [0, 1, -dt], [0, 0, 1 - dt / tau]], dtype=torch.float64)
+        state = _state([0.0, -9.0], [25.0, 24.0], [0.0, 0.5], [0.0, 0.5])
+        u = torch.tensor([[2.0]])
+        after = IntervalIntegrator(params, "cpu").integrate(state, torch.tensor([0.0]), u, torch.zeros(1, 1, dtype=torch.long))
+        x = _error_coordinates(state, params)[0, 0].double()
+        euler = a_mat @ x + torch.tensor([0, 0, dt / tau], dtype=torch.float64) * 2.0
+        return float((_error_coordinates(after, params)[0, 0].double() - euler).abs().max())
+
+    coarse, fine, finer = discrepancy(0.05), discrepancy(0.025), discrepancy(0.0125)
+    # local error O(Δt²): each halving divides it by ≈ 4 (Δt/τ = 0.5 is not small at 50 ms)
+    assert 3.0 < coarse / fine < 5.0
+    assert 3.0 < fine / finer < 5.0
+
+
+@pytest.mark.parametrize("switch", [0, 7, 49, 50])
+def test_delayed_command_switch_inside_interval(switch):
+    params = PlatoonParams()
+    t, dt, tau = params.subframes_per_interval, params.subframe_s, params.driveline_lag_s
+    state = _state([0.0, -9.0], [20.0, 20.5], [0.3, -0.4], [0.3, -1.0])
+    u_new = 1.5
+    after = IntervalIntegrator(params, "cpu").integrate(
+        state, torch.tensor([0.3]), torch.tensor([[u_new]]), torch.tensor([[switch]])
+    )
+    p, v, a = -9.0, 20.5, -0.4  # brute-force reference: explicit Euler with a ZOH switch
+    for s in range(t):
+        u = -1.0 if s < switch else u_new
+        p, v, a = p + dt * v, v + dt * a, a + dt / tau * (u - a)
+    assert after.position_m[0, 1].item() == pytest.approx(p, abs=1e-4)
+    assert after.speed_mps[0, 1].item() == pytest.approx(v, abs=1e-5)
+    assert after.accel_mps2[0, 1].item() == pytest.approx(a, abs=1e-5)
+    assert after.command_mps2[0, 1].item() == u_new
+
+
+def test_collision_ends_in_penalty():
+    twin = DigitalTwin(TwinParams.from_overrides(num_vehicles=2), seed=0, radio=False, trace_source="constant")
+    for _ in range(200):
+        record = twin.finish_interval(torch.tensor([[2.6]]), perfect=True)
+        twin.begin_interval()
+        if record.collided.any():
+            break
+    assert bool(record.collided[0, 0])
+    assert record.reward[0, 0].item() < -100.0 + 1e-6
+    assert record.gap_error_m[0, 0].item() < -2.0  # gap ≤ 0 ⇒ e_p ≤ −(r + h·v)
+
+
+def test_seeded_twins_are_identical_and_seeds_differ():
+    def run(seed):
+        twin = DigitalTwin(batch_size=3, seed=seed)
+        gen = torch.Generator().manual_seed(5)
+        for _ in range(twin.subframes_per_interval):
+            twin.step_subframe(torch.randint(0, 16, (3, 3), generator=gen))
+        return twin.finish_interval(torch.zeros(3, 3), perfect=False)
+
+    a, b, c = run(1), run(1), run(2)
+    assert torch.equal(a.v2i_rate_bps, b.v2i_rate_bps) and torch.equal(a.reward, b.reward)
+    assert not torch.equal(a.v2i_rate_bps, c.v2i_rate_bps)
+
+
+def test_radio_matches_spec_sanity_figures():
+    """docs/model.md §4: ≈ 2.2 Mbps per V2I link without V2V traffic, ≈ 1.5 at 5 dBm."""
+    twin = DigitalTwin(batch_size=256, seed=3, trace_source="constant")
+    levels, m, links = twin.params.radio.num_power_levels, twin.num_subchannels, twin.num_links
+
+    def mean_rate(level):
+        rates = []
+        for _ in range(twin.subframes_per_interval):
+            channel_idx = torch.randint(0, m, (256, links), generator=twin.generator)
+            rates.append(twin.step_subframe(channel_idx * levels + level).v2i_rate_bps.mean())
+        twin.reset()
+        return float(torch.stack(rates).mean()) / 1e6
+
+    assert 1.8 < mean_rate(levels - 1) < 2.6
+    assert 1.2 < mean_rate(2) < 1.8
+
+
+def test_extreme_speeds_keep_everything_finite():
+    params = TwinParams.from_overrides(num_vehicles=4)
+    twin = DigitalTwin(params, batch_size=8, seed=0)
+    twin.platoon.speed_mps[:] = 0.0  # standstill, then full braking commands
+    for _ in range(3):
+        for _ in range(twin.subframes_per_interval):
+            twin.step_subframe(torch.zeros(8, 3, dtype=torch.long))
+            assert torch.isfinite(twin.rra_observation()).all()
+        rec = twin.finish_interval(torch.full((8, 3), -2.6), perfect=False)
+        twin.begin_interval()
+        assert torch.isfinite(rec.reward).all() and (rec.state_after.speed_mps >= 0).all()
+    assert torch.isfinite(twin.vehicle_observation(perfect=False)).all()
+
+
+@pytest.mark.parametrize(
+    "kwargs, fragment",
+    [
+        ({"batch_size": 0}, "batch_size=0"),
+        ({"batch_size": -3}, "batch_size=-3"),
+        ({"device": "cuda:7"} if not torch.cuda.is_available() else {"device": "nonsense"}, "device="),
+        ({"backend": "jax"}, "backend='jax'"),
+    ],
+)
+def test_bad_twin_arguments_name_the_value(kwargs, fragment):
+    with pytest.raises(ConfigError, match=fragment.replace("(", r"\(")):
+        DigitalTwin(**kwargs)
+
+
+@pytest.mark.parametrize(
+    "override, fragment",
+    [
+        ({"num_vehicles": 1}, "num_vehicles=1"),
+        ({"driveline_lag_s": -0.1}, "driveline_lag_s=-0.1"),
+        ({"cam_size_bits": 0}, "cam_size_bits=0"),
+        ({"no_such_key": 1}, "unknown model parameter 'no_such_key'"),
+    ],
+)
+def test_bad_model_parameters_name_key_and_range(override, fragment):
+    with pytest.raises(ConfigError, match=fragment):
+        TwinParams.from_overrides(**override)
+
+
+def test_bad_rra_actions_raise_with_range():
+    twin = DigitalTwin(seed=0)
+    with pytest.raises(ValueError, match=r"\[0, 15\]"):
+        twin.step_subframe(torch.tensor([[0, 16, 1]]))
+    with pytest.raises(ValueError, match="shape"):
+        twin.step_subframe(torch.tensor([[0, 1]]))
+    with pytest.raises(ValueError, match="integers"):
+        twin.step_subframe(torch.tensor([[0.5, 1.0, 2.0]]))
