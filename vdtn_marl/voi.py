@@ -30,7 +30,9 @@ from vdtn_marl.sim.platoon import (
 )
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
-Policy = Callable[[torch.Tensor], torch.Tensor]  # vehicle observations [..., F, 8] → commands [..., F]
+Policy = Callable[
+    [torch.Tensor], torch.Tensor
+]  # vehicle observations [..., F, 8] → commands [..., F]
 
 
 class IVoIEstimator(Protocol):
@@ -98,8 +100,9 @@ class RolloutIVoIEstimator:
                 switch = zero_switch
             after = integrator.integrate(state, leader[:, h], u, switch)
             gap_error, speed_error = spacing_errors(after, pp)
-            reward = control_reward(gap_error, speed_error, after.command_mps2[:, 1:],
-                                    state.command_mps2[:, 1:], pp)
+            reward = control_reward(
+                gap_error, speed_error, after.command_mps2[:, 1:], state.command_mps2[:, 1:], pp
+            )
             reward = reward + (gaps_m(after.position_m, pp) <= 0).float() * pp.collision_penalty
             returns = returns + weight * reward
             weight *= self.discount

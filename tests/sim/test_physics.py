@@ -69,7 +69,7 @@ def test_sinr_and_rate_two_link_toy_case():
         v2i_sig=[4e-10, 6e-10],
     )
     state = link.new_link_state(1, 2, 2, radio, 1, "cpu")
-    p = 10 ** 2.3  # 23 dBm in mW
+    p = 10**2.3  # 23 dBm in mW
     # both links on sub-channel 0 at 23 dBm (action 0)
     out = link.subframe_step(tables, 0, torch.tensor([[0, 0]]), state, decode, const)
     sinr1 = p * 1e-4 / (n + 1e-12 + p * 1e-6)
@@ -85,13 +85,20 @@ def test_same_kernel_on_numpy_and_torch():
     radio = RadioParams(num_subchannels=2)
     const, decode = _two_link_setup(radio)
     tables = _tables(
-        own=[[1e-4, 3e-4], [2e-4, 5e-5]], v2i_rx=[[1e-11, 3e-12], [5e-12, 7e-11]],
-        to_bs=[[1e-12, 4e-12], [2e-12, 2e-12]], cross=[[0.0, 1e-6], [3e-6, 0.0]], v2i_sig=[4e-10, 6e-10],
+        own=[[1e-4, 3e-4], [2e-4, 5e-5]],
+        v2i_rx=[[1e-11, 3e-12], [5e-12, 7e-11]],
+        to_bs=[[1e-12, 4e-12], [2e-12, 2e-12]],
+        cross=[[0.0, 1e-6], [3e-6, 0.0]],
+        v2i_sig=[4e-10, 6e-10],
     )
     actions = torch.tensor([[1, 5]])  # link 1: ch 0 at 15 dBm; link 2: ch 1 at 15 dBm
-    out_t = link.subframe_step(tables, 0, actions, link.new_link_state(1, 2, 2, radio, 1, "cpu"), decode, const)
+    out_t = link.subframe_step(
+        tables, 0, actions, link.new_link_state(1, 2, 2, radio, 1, "cpu"), decode, const
+    )
     state_np = link.new_link_state(1, 2, 2, radio, 1, "cpu").numpy()
-    out_n = link.subframe_step(tables.numpy(), 0, actions.numpy(), state_np, decode.numpy(), const.numpy())
+    out_n = link.subframe_step(
+        tables.numpy(), 0, actions.numpy(), state_np, decode.numpy(), const.numpy()
+    )
     np.testing.assert_allclose(out_n.v2v_bits, out_t.v2v_bits.numpy(), rtol=1e-6)
     np.testing.assert_allclose(out_n.v2i_rate_bps, out_t.v2i_rate_bps.numpy(), rtol=1e-6)
 
@@ -100,12 +107,15 @@ def test_cam_delivery_subframe_for_fixed_rate():
     # SINR = 3 ⇒ log2(4) = 2 bit/s/Hz ⇒ 360 bits per 1 ms subframe ⇒ 14,400 bits in 40 subframes
     radio = RadioParams(num_subchannels=2)
     const, decode = _two_link_setup(radio)
-    p = 10 ** 2.3
+    p = 10**2.3
     gain = 3 * const.noise_mw / p
     t = 50
     tables = link.IntervalTables(
-        torch.full((t, 1, 2, 2), gain), torch.zeros(t, 1, 2, 2), torch.zeros(t, 1, 2, 2),
-        torch.zeros(t, 1, 2, 2), torch.full((t, 1, 2), 1e-9),
+        torch.full((t, 1, 2, 2), gain),
+        torch.zeros(t, 1, 2, 2),
+        torch.zeros(t, 1, 2, 2),
+        torch.zeros(t, 1, 2, 2),
+        torch.full((t, 1, 2), 1e-9),
     )
     state = link.new_link_state(1, 2, 2, radio, t, "cpu")
     off = radio.num_power_levels - 1
@@ -137,7 +147,9 @@ def test_error_coordinate_matrices_match_integrator_for_single_subframe():
     c_vec = torch.tensor([0, dt, 0])
     state = _state([0.0, -9.0, -17.5], [25.0, 24.0, 24.6], [0.0, 0.4, -0.3], [0.0, 0.1, -0.2])
     leader_accel, u = torch.tensor([0.8]), torch.tensor([[1.2, -0.7]])
-    after = IntervalIntegrator(params, "cpu").integrate(state, leader_accel, u, torch.zeros(1, 2, dtype=torch.long))
+    after = IntervalIntegrator(params, "cpu").integrate(
+        state, leader_accel, u, torch.zeros(1, 2, dtype=torch.long)
+    )
     x, x_next = _error_coordinates(state, params)[0], _error_coordinates(after, params)[0]
     pred_accel = torch.stack([leader_accel[0], state.accel_mps2[0, 1]])
     expected = x @ a_mat.T + u[0, :, None] * b_vec + pred_accel[:, None] * c_vec
@@ -148,12 +160,18 @@ def test_per_subframe_integration_agrees_with_matrices_to_first_order():
     """Discrepancy to the interval-level Euler map shrinks ~Δt² when Δt halves."""
 
     def discrepancy(interval_s):
-        params = PlatoonParams(control_interval_s=interval_s, subframes_per_interval=round(interval_s / 1e-3))
+        params = PlatoonParams(
+            control_interval_s=interval_s, subframes_per_interval=round(interval_s / 1e-3)
+        )
         dt, h, tau = interval_s, params.time_headway_s, params.driveline_lag_s
-        a_mat = torch.tensor([[1, dt, -h * dt], [0, 1, -dt], [0, 0, 1 - dt / tau]], dtype=torch.float64)
+        a_mat = torch.tensor(
+            [[1, dt, -h * dt], [0, 1, -dt], [0, 0, 1 - dt / tau]], dtype=torch.float64
+        )
         state = _state([0.0, -9.0], [25.0, 24.0], [0.0, 0.5], [0.0, 0.5])
         u = torch.tensor([[2.0]])
-        after = IntervalIntegrator(params, "cpu").integrate(state, torch.tensor([0.0]), u, torch.zeros(1, 1, dtype=torch.long))
+        after = IntervalIntegrator(params, "cpu").integrate(
+            state, torch.tensor([0.0]), u, torch.zeros(1, 1, dtype=torch.long)
+        )
         x = _error_coordinates(state, params)[0, 0].double()
         euler = a_mat @ x + torch.tensor([0, 0, dt / tau], dtype=torch.float64) * 2.0
         return float((_error_coordinates(after, params)[0, 0].double() - euler).abs().max())
@@ -184,7 +202,9 @@ def test_delayed_command_switch_inside_interval(switch):
 
 
 def test_collision_ends_in_penalty():
-    twin = DigitalTwin(TwinParams.from_overrides(num_vehicles=2), seed=0, radio=False, trace_source="constant")
+    twin = DigitalTwin(
+        TwinParams.from_overrides(num_vehicles=2), seed=0, radio=False, trace_source="constant"
+    )
     for _ in range(200):
         record = twin.finish_interval(torch.tensor([[2.6]]), perfect=True)
         twin.begin_interval()
@@ -244,7 +264,10 @@ def test_extreme_speeds_keep_everything_finite():
     [
         ({"batch_size": 0}, "batch_size=0"),
         ({"batch_size": -3}, "batch_size=-3"),
-        ({"device": "cuda:7"} if not torch.cuda.is_available() else {"device": "nonsense"}, "device="),
+        (
+            {"device": "cuda:7"} if not torch.cuda.is_available() else {"device": "nonsense"},
+            "device=",
+        ),
         ({"backend": "jax"}, "backend='jax'"),
     ],
 )

@@ -35,7 +35,9 @@ def rra_name(link_index: int) -> str:
 
 def vehicle_observation_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
     low, high = vehicle_observation_bounds(twin.params.platoon)
-    return gymnasium.spaces.Box(np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32)
+    return gymnasium.spaces.Box(
+        np.array(low, np.float32), np.array(high, np.float32), dtype=np.float32
+    )
 
 
 def vehicle_action_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
@@ -68,7 +70,9 @@ def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
     if not (isinstance(kappa2, int | float) and 0.0 <= kappa2 <= 1.0):
         raise ConfigError(f"kappa2={kappa2!r} is outside the allowed range [0, 1]")
     if not math.isclose(kappa1 + kappa2, 1.0, abs_tol=1e-9):
-        raise ConfigError(f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})")
+        raise ConfigError(
+            f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})"
+        )
     return float(kappa1), float(kappa2)
 
 
@@ -98,18 +102,23 @@ class VDTNParallelEnv(ParallelEnv):
         params = TwinParams.from_overrides(**model_kwargs)
         backend = "numpy" if torch.device(device).type == "cpu" else "torch"
         self.twin = DigitalTwin(
-            params, batch_size=1, device=device, seed=seed, trace_source=trace_source,
-            radio=radio, backend=backend,
+            params,
+            batch_size=1,
+            device=device,
+            seed=seed,
+            trace_source=trace_source,
+            radio=radio,
+            backend=backend,
         )
         self._numpy = backend == "numpy"
         self.last_record: IntervalRecord | None = None
 
     # -- spaces (cached: PettingZoo requires the same object on every call)
-    @functools.lru_cache(maxsize=None)  # noqa: B019 - one cache entry per (env, agent), by design
+    @functools.cache  # noqa: B019 - one cache entry per (env, agent), by design
     def observation_space(self, agent: str) -> gymnasium.spaces.Space:
         return self._observation_space(self._check_agent(agent))
 
-    @functools.lru_cache(maxsize=None)  # noqa: B019
+    @functools.cache  # noqa: B019
     def action_space(self, agent: str) -> gymnasium.spaces.Space:
         return self._action_space(self._check_agent(agent))
 
@@ -121,7 +130,9 @@ class VDTNParallelEnv(ParallelEnv):
     def _check_action_keys(self, actions: dict) -> None:
         unknown = set(actions) - set(self.possible_agents)
         if unknown:
-            raise KeyError(f"unknown agent(s) {sorted(unknown)} in actions; agents are {self.possible_agents}")
+            raise KeyError(
+                f"unknown agent(s) {sorted(unknown)} in actions; agents are {self.possible_agents}"
+            )
 
     def _vehicle_commands(self, actions: dict, names: list[str]) -> np.ndarray:
         """Acceleration commands [F] (m/s²) from a dict of Box(1) actions, validated."""
@@ -137,7 +148,8 @@ class VDTNParallelEnv(ParallelEnv):
             u = float(value.reshape(()))
             if not (pp.accel_min_mps2 <= u <= pp.accel_max_mps2):  # also rejects NaN
                 raise ValueError(
-                    f"action of {name} = {u!r} m/s² is outside [{pp.accel_min_mps2}, {pp.accel_max_mps2}]"
+                    f"action of {name} = {u!r} m/s² is outside "
+                    f"[{pp.accel_min_mps2}, {pp.accel_max_mps2}]"
                 )
             out[i] = u
         return out

@@ -37,7 +37,6 @@ from vdtn_marl.envs.base import (
 )
 from vdtn_marl.envs.policies import RandomRRAPolicy
 
-
 #: Per-follower info before the first interval closes (same keys and types as interval_infos).
 INITIAL_INTERVAL_INFO = {
     "gap_error_m": 0.0,
@@ -88,14 +87,22 @@ class PlatoonControlEnv(VDTNParallelEnv):
         device: str = "cpu",
         **model_kwargs,
     ):
-        super().__init__(radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs)
+        super().__init__(
+            radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs
+        )
         self.impaired = impaired
-        self.metadata = {**self.metadata, "name": "platoon_control_impaired_v0" if impaired else "platoon_control_v0"}
+        self.metadata = {
+            **self.metadata,
+            "name": "platoon_control_impaired_v0" if impaired else "platoon_control_v0",
+        }
         self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
         self.agents: list[str] = []
         self.rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
         if not callable(self.rra_policy):
-            raise TypeError(f"rra_policy={rra_policy!r} must be callable: observations [1, L, D] -> actions [1, L]")
+            raise TypeError(
+                f"rra_policy={rra_policy!r} must be callable: "
+                "observations [1, L, D] -> actions [1, L]"
+            )
 
     def _observation_space(self, agent):
         return vehicle_observation_space(self.twin)

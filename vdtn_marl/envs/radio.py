@@ -27,5 +27,7 @@ class V2XRRAEnv(TwoTimescaleEnv):
 
     def __init__(self, control_module: Callable | None = None, **kwargs):
         if "vehicles_are_agents" in kwargs:
-            raise TypeError("V2XRRAEnv drives the vehicles internally; use TwoTimescaleEnv for both groups")
+            raise TypeError(
+                "V2XRRAEnv drives the vehicles internally; use TwoTimescaleEnv for both groups"
+            )
         super().__init__(vehicles_are_agents=False, control_module=control_module, **kwargs)

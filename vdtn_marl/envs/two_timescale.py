@@ -66,25 +66,38 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         device: str = "cpu",
         **model_kwargs,
     ):
-        self.reward_fn = RRAReward(reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty)
-        super().__init__(radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs)
+        self.reward_fn = RRAReward(
+            reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
+        )
+        super().__init__(
+            radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs
+        )
         twin = self.twin
-        estimator_kwargs = {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
+        estimator_kwargs = (
+            {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
+        )
         self.ivoi_estimator = make_ivoi_estimator(
             ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
         )
         self.vehicles_are_agents = vehicles_are_agents
         self.control_module = control_module or CACCController(twin.params.platoon)
         if not callable(self.control_module):
-            raise TypeError(f"control_module={control_module!r} must be callable: observations -> commands")
+            raise TypeError(
+                f"control_module={control_module!r} must be callable: observations -> commands"
+            )
         self.vehicle_agents = [vehicle_name(i + 1) for i in range(twin.num_followers)]
         self.rra_agents = [rra_name(i + 1) for i in range(twin.num_links)]
-        self.possible_agents = (self.vehicle_agents if vehicles_are_agents else []) + self.rra_agents
+        self.possible_agents = (
+            self.vehicle_agents if vehicles_are_agents else []
+        ) + self.rra_agents
         self.agents: list[str] = []
-        self.metadata = {**self.metadata, "name": "vdtn_joint_v0" if vehicles_are_agents else "v2x_rra_v0"}
-        self._period = {a: twin.subframes_per_interval for a in self.vehicle_agents} | dict.fromkeys(
-            self.rra_agents, 1
-        )
+        self.metadata = {
+            **self.metadata,
+            "name": "vdtn_joint_v0" if vehicles_are_agents else "v2x_rra_v0",
+        }
+        self._period = {
+            a: twin.subframes_per_interval for a in self.vehicle_agents
+        } | dict.fromkeys(self.rra_agents, 1)
         self._bandwidth_hz = twin.params.radio.subchannel_bandwidth_hz
         self._subframe_s = twin.params.platoon.subframe_s
 
@@ -97,10 +110,18 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         return self.twin.subframe == self.twin.subframes_per_interval - 1
 
     def _observation_space(self, agent):
-        return vehicle_observation_space(self.twin) if agent.startswith("vehicle_") else rra_observation_space(self.twin)
+        return (
+            vehicle_observation_space(self.twin)
+            if agent.startswith("vehicle_")
+            else rra_observation_space(self.twin)
+        )
 
     def _action_space(self, agent):
-        return vehicle_action_space(self.twin) if agent.startswith("vehicle_") else rra_action_space(self.twin)
+        return (
+            vehicle_action_space(self.twin)
+            if agent.startswith("vehicle_")
+            else rra_action_space(self.twin)
+        )
 
     # -- API
     def reset(self, seed: int | None = None, options: dict | None = None):
@@ -179,7 +200,9 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost)[0].cpu().numpy()
             ivoi = xi[0].tolist()
             vehicle_reward = record.reward[0].tolist()
-            closing = interval_infos(record, self.vehicle_agents, twin.interval_ms, twin.subframe_ms)
+            closing = interval_infos(
+                record, self.vehicle_agents, twin.interval_ms, twin.subframe_ms
+            )
             terminated = bool(record.collided.any())
             truncated = bool(record.truncated[0]) and not terminated
             if not (terminated or truncated):

@@ -34,12 +34,7 @@ def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tenso
     breakpoint_m = 4.0 * (h - 1.0) ** 2 * f_ghz * 1e9 / SPEED_OF_LIGHT_MPS
     d = distance_m.clamp_min(3.0)
     near = 22.7 * torch.log10(d) + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
-    far = (
-        40.0 * torch.log10(d)
-        + 9.45
-        - 2 * 17.3 * math.log10(h)
-        + 2.7 * math.log10(f_ghz / 5.0)
-    )
+    far = 40.0 * torch.log10(d) + 9.45 - 2 * 17.3 * math.log10(h) + 2.7 * math.log10(f_ghz / 5.0)
     return torch.where(d < breakpoint_m, near, far)
 
 

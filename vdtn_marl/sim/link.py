@@ -84,7 +84,9 @@ class LinkState:
     """CAM progress of each V2V link in the current interval (arrays of the kernel's backend)."""
 
     remaining_bits: Array  # [B, L] float32, ≤ 0 once delivered
-    delay_subframes: Array  # [B, L] int64: subframe (1..T) in which the last bit arrived; T+1 = not yet
+    delay_subframes: (
+        Array  # [B, L] int64: subframe (1..T) in which the last bit arrived; T+1 = not yet
+    )
     occupancy: Array  # [B, M] float32: transmitting V2V links per sub-channel in the last subframe
 
     def numpy(self) -> LinkState:
@@ -166,9 +168,7 @@ def build_interval_tables(
     cut = np.cumsum([0, links * subch, links * subch, links * subch, links * links])
     own = fading[..., cut[0] : cut[1]].reshape(t, b, links, subch) * own_ls[None, :, :, None]
     v2i_rx = (
-        fading[..., cut[1] : cut[2]].reshape(t, b, links, subch)
-        * v2i_to_rx_ls[None]
-        * v2i_power_mw
+        fading[..., cut[1] : cut[2]].reshape(t, b, links, subch) * v2i_to_rx_ls[None] * v2i_power_mw
     )
     to_bs = fading[..., cut[2] : cut[3]].reshape(t, b, links, subch) * tx_to_bs_ls[None, :, :, None]
     cross = fading[..., cut[3] : cut[4]].reshape(t, b, links, links) * cross_ls[None]

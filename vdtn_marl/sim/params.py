@@ -122,7 +122,9 @@ class RadioParams:
     def validate(self) -> None:
         if not 1 <= self.num_subchannels <= 64:
             raise ConfigError(f"num_subchannels={self.num_subchannels!r} is outside [1, 64]")
-        _check_range("subchannel_bandwidth_hz", self.subchannel_bandwidth_hz, 0.0, 1e9, low_open=True)
+        _check_range(
+            "subchannel_bandwidth_hz", self.subchannel_bandwidth_hz, 0.0, 1e9, low_open=True
+        )
         _check_range("carrier_ghz", self.carrier_ghz, 0.0, 100.0, low_open=True)
         _check_range("v2i_power_dbm", self.v2i_power_dbm, -50.0, 46.0)
         if len(self.v2v_power_levels_dbm) == 0:

@@ -101,9 +101,7 @@ def initial_state(
         spacing = spacing + (params.initial_gap_noise_m * noise).clamp(
             -0.5 * params.standstill_gap_m, None
         )
-    position = torch.cat(
-        [torch.zeros(b, 1, device=dev), -torch.cumsum(spacing, dim=1)], dim=1
-    )
+    position = torch.cat([torch.zeros(b, 1, device=dev), -torch.cumsum(spacing, dim=1)], dim=1)
     zeros = torch.zeros(b, n, device=dev)
     return PlatoonState(position, speed, zeros.clone(), zeros)
 
@@ -160,7 +158,9 @@ class IntervalIntegrator:
 
         interval_s = p.control_interval_s
         lead_v = state.speed_mps[:, 0]
-        lead_p = state.position_m[:, 0] + interval_s * lead_v + self.leader_pos_gain * leader_accel_mps2
+        lead_p = (
+            state.position_m[:, 0] + interval_s * lead_v + self.leader_pos_gain * leader_accel_mps2
+        )
         lead_v = (lead_v + interval_s * leader_accel_mps2).clamp_min(0.0)
 
         position = torch.cat([lead_p[:, None], z[..., 0]], dim=1)

@@ -71,7 +71,9 @@ def resolve_device(device: str | torch.device) -> torch.device:
     try:
         dev = torch.device(device)
     except (RuntimeError, TypeError) as err:
-        raise ConfigError(f"device={device!r} is not a valid torch device ('cpu', 'cuda', 'cuda:0')") from err
+        raise ConfigError(
+            f"device={device!r} is not a valid torch device ('cpu', 'cuda', 'cuda:0')"
+        ) from err
     if dev.type == "cuda" and not torch.cuda.is_available():
         raise ConfigError(f"device={device!r} requested but CUDA is not available; use 'cpu'")
     return dev
@@ -105,7 +107,11 @@ class DigitalTwin:
         lookahead_intervals: int = 200,
     ):
         self.params = (params or TwinParams()).validate()
-        if not isinstance(batch_size, int | np.integer) or isinstance(batch_size, bool) or batch_size < 1:
+        if (
+            not isinstance(batch_size, int | np.integer)
+            or isinstance(batch_size, bool)
+            or batch_size < 1
+        ):
             raise ConfigError(f"batch_size={batch_size!r} must be an integer >= 1")
         if backend not in ("torch", "numpy"):
             raise ConfigError(f"backend={backend!r} must be one of 'torch', 'numpy'")
@@ -162,7 +168,10 @@ class DigitalTwin:
         traces = self.trace_source.sample(count, num_points, pp.control_interval_s, self.generator)
         traces = traces.to(device=dev, dtype=torch.float32)
         if not torch.isfinite(traces).all() or (traces < 0).any():
-            raise ValueError(f"trace source {self.trace_source.info.name!r} returned non-finite or negative speeds")
+            raise ValueError(
+                f"trace source {self.trace_source.info.name!r} returned "
+                "non-finite or negative speeds"
+            )
         state = initial_state(traces[:, 0], pp, self.generator)
         v2v_shadow = rp.v2v_shadow_std_db * channel.symmetric_normal(
             (count, pp.num_vehicles, pp.num_vehicles), self.generator
@@ -170,7 +179,9 @@ class DigitalTwin:
         v2i_shadow = rp.v2i_shadow_std_db * torch.randn(
             count, pp.num_vehicles, generator=self.generator, device=dev
         )
-        bs_offset = rp.inter_site_distance_m * torch.rand(count, generator=self.generator, device=dev)
+        bs_offset = rp.inter_site_distance_m * torch.rand(
+            count, generator=self.generator, device=dev
+        )
         cam_held = cam_snapshot(state)
         if mask is None:
             self.leader_speed_mps = traces
@@ -186,8 +197,10 @@ class DigitalTwin:
         idx = mask.nonzero().squeeze(-1)
         self.leader_speed_mps[idx] = traces
         self.platoon = PlatoonState(
-            *(self._scatter(getattr(self.platoon, k), idx, getattr(state, k)) for k in
-              ("position_m", "speed_mps", "accel_mps2", "command_mps2"))
+            *(
+                self._scatter(getattr(self.platoon, k), idx, getattr(state, k))
+                for k in ("position_m", "speed_mps", "accel_mps2", "command_mps2")
+            )
         )
         self.v2v_shadow_db[idx] = v2v_shadow
         self.v2i_shadow_db[idx] = v2i_shadow
@@ -212,7 +225,11 @@ class DigitalTwin:
         the others keep their current interval unchanged.
         """
         snapshot = cam_snapshot(self.platoon)
-        self.cam_snapshot = snapshot if mask is None else torch.where(mask[:, None, None], snapshot, self.cam_snapshot)
+        self.cam_snapshot = (
+            snapshot
+            if mask is None
+            else torch.where(mask[:, None, None], snapshot, self.cam_snapshot)
+        )
         self.subframe = 0
         if not self.radio_enabled:
             return
@@ -224,11 +241,18 @@ class DigitalTwin:
         obs = self._rra_observation_buffer(tables)
         v2i_sum = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
         if mask is not None:
-            tables, link_state, obs, v2i_sum = self._merge_interval(mask, tables, link_state, obs, v2i_sum)
+            tables, link_state, obs, v2i_sum = self._merge_interval(
+                mask, tables, link_state, obs, v2i_sum
+            )
         if self.backend == "numpy":
             tables, link_state = tables.numpy(), link_state.numpy()
             obs, v2i_sum = obs.numpy(), v2i_sum.numpy()
-        self.tables, self.link_state, self._rra_obs, self._v2i_rate_sum = tables, link_state, obs, v2i_sum
+        self.tables, self.link_state, self._rra_obs, self._v2i_rate_sum = (
+            tables,
+            link_state,
+            obs,
+            v2i_sum,
+        )
 
     def _merge_interval(self, mask, tables, link_state, obs, v2i_sum):
         def merge(new, old, batch_dim):
@@ -238,14 +262,29 @@ class DigitalTwin:
             return torch.where(mask.view(shape), new, old)
 
         tables = link.IntervalTables(
-            *(merge(getattr(tables, k), getattr(self.tables, k), 1) for k in
-              ("own_gain", "v2i_to_rx_mw", "tx_to_bs_gain", "cross_gain", "v2i_signal_mw"))
+            *(
+                merge(getattr(tables, k), getattr(self.tables, k), 1)
+                for k in (
+                    "own_gain",
+                    "v2i_to_rx_mw",
+                    "tx_to_bs_gain",
+                    "cross_gain",
+                    "v2i_signal_mw",
+                )
+            )
         )
         link_state = link.LinkState(
-            *(merge(getattr(link_state, k), getattr(self.link_state, k), 0) for k in
-              ("remaining_bits", "delay_subframes", "occupancy"))
+            *(
+                merge(getattr(link_state, k), getattr(self.link_state, k), 0)
+                for k in ("remaining_bits", "delay_subframes", "occupancy")
+            )
         )
-        return tables, link_state, merge(obs, self._rra_obs, 1), merge(v2i_sum, self._v2i_rate_sum, 0)
+        return (
+            tables,
+            link_state,
+            merge(obs, self._rra_obs, 1),
+            merge(v2i_sum, self._v2i_rate_sum, 0),
+        )
 
     def _draw_interval_tables(self) -> link.IntervalTables:
         rp = self.params.radio
@@ -255,11 +294,17 @@ class DigitalTwin:
         g = self.generator
         n = x.shape[1]
         self.v2v_shadow_db = channel.shadowing_update_db(
-            self.v2v_shadow_db, moved[:, :, None] + moved[:, None, :], rp.v2v_shadow_std_db,
-            rp.v2v_decorrelation_m, channel.symmetric_normal((self.batch_size, n, n), g),
+            self.v2v_shadow_db,
+            moved[:, :, None] + moved[:, None, :],
+            rp.v2v_shadow_std_db,
+            rp.v2v_decorrelation_m,
+            channel.symmetric_normal((self.batch_size, n, n), g),
         )
         self.v2i_shadow_db = channel.shadowing_update_db(
-            self.v2i_shadow_db, moved, rp.v2i_shadow_std_db, rp.v2i_decorrelation_m,
+            self.v2i_shadow_db,
+            moved,
+            rp.v2i_shadow_std_db,
+            rp.v2i_decorrelation_m,
             torch.randn(self.batch_size, n, generator=g, device=self.device),
         )
         bs_x = channel.serving_bs_x_m(x.mean(dim=1), self.bs_offset_m, rp)
@@ -273,8 +318,13 @@ class DigitalTwin:
         return link.build_interval_tables(v2v_db, v2i_db, rp, self.subframes_per_interval, g)
 
     def _rra_observation_buffer(self, tables: link.IntervalTables) -> torch.Tensor:
-        """[T, B, L, D]: CSI blocks, (occupancy, remaining bits: filled per subframe), time, control."""
-        t, b, n_l, m = self.subframes_per_interval, self.batch_size, self.num_links, self.num_subchannels
+        """[T, B, L, D]: CSI, occupancy and bits left (filled per subframe), time, control."""
+        t, b, n_l, m = (
+            self.subframes_per_interval,
+            self.batch_size,
+            self.num_links,
+            self.num_subchannels,
+        )
         pp = self.params.platoon
         csi = link.rra_static_observation(tables, self.params.radio, self._const_torch.noise_mw)
         gap_error, speed_error = spacing_errors(self.platoon, pp)
@@ -311,7 +361,9 @@ class DigitalTwin:
                 "call finish_interval() first"
             )
         self._check_rra_actions(actions)
-        outcome = link.subframe_step(self.tables, t, actions, self.link_state, self._decode, self._const)
+        outcome = link.subframe_step(
+            self.tables, t, actions, self.link_state, self._decode, self._const
+        )
         self._v2i_rate_sum += outcome.v2i_rate_bps
         self.subframe = t + 1
         return outcome
@@ -324,7 +376,9 @@ class DigitalTwin:
         if self.backend == "numpy":
             bad = actions.dtype.kind not in "iu" or actions.min() < 0 or actions.max() >= n_act
         else:
-            bad = actions.dtype.is_floating_point or bool(((actions < 0) | (actions >= n_act)).any())
+            bad = actions.dtype.is_floating_point or bool(
+                ((actions < 0) | (actions >= n_act)).any()
+            )
         if bad:
             count = actions.size if self.backend == "numpy" else actions.numel()
             shown = actions.tolist() if count <= 16 else f"array of {count}"
@@ -340,7 +394,9 @@ class DigitalTwin:
         obs = self._rra_obs[t]
         obs[..., 3 * m : 4 * m] = self.link_state.occupancy[:, None, :] / self.num_links
         remaining = self.link_state.remaining_bits / self.params.radio.cam_size_bits
-        obs[..., 4 * m] = remaining.clip(0.0, 1.0) if self.backend == "numpy" else remaining.clamp(0.0, 1.0)
+        obs[..., 4 * m] = (
+            remaining.clip(0.0, 1.0) if self.backend == "numpy" else remaining.clamp(0.0, 1.0)
+        )
         return obs
 
     # ------------------------------------------------------------------ interval end
@@ -356,7 +412,9 @@ class DigitalTwin:
         """
         t = self.subframes_per_interval
         if perfect:
-            return torch.zeros(self.batch_size, self.num_followers, dtype=torch.long, device=self.device)
+            return torch.zeros(
+                self.batch_size, self.num_followers, dtype=torch.long, device=self.device
+            )
         delay = self._delivery_subframes()
         return torch.where(delay <= t - 1, delay, torch.full_like(delay, t))
 
@@ -368,13 +426,15 @@ class DigitalTwin:
         usable = switch < self.subframes_per_interval
         content = torch.where(usable[..., None], self.cam_snapshot, self.cam_held)
         age_intervals = (self.interval[:, None] - self.cam_held_interval).float()
-        age_ms = torch.where(usable, torch.zeros_like(age_intervals), age_intervals * self.interval_ms)
+        age_ms = torch.where(
+            usable, torch.zeros_like(age_intervals), age_intervals * self.interval_ms
+        )
         return vehicle_observation(
             self.platoon, content, switch.float() * self.subframe_ms, age_ms, self.params.platoon
         )
 
     def leader_accel_mps2(self, intervals: torch.Tensor) -> torch.Tensor:
-        """Leader acceleration (m/s²) in the given intervals, ``intervals`` [B, ...] → same shape."""
+        """Leader acceleration (m/s²) in intervals ``intervals`` [B, ...] → same shape."""
         last = self.leader_speed_mps.shape[1] - 2
         k = intervals.clamp(0, last)
         flat = k.reshape(self.batch_size, -1)
@@ -391,14 +451,20 @@ class DigitalTwin:
         """
         t = self.subframes_per_interval
         if self.radio_enabled and not perfect and self.subframe != t:
-            raise RuntimeError(f"finish_interval after {self.subframe} of {t} subframes; run all {t} first")
+            raise RuntimeError(
+                f"finish_interval after {self.subframe} of {t} subframes; run all {t} first"
+            )
         expected = (self.batch_size, self.num_followers)
         if tuple(commands_mps2.shape) != expected:
-            raise ValueError(f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}")
+            raise ValueError(
+                f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}"
+            )
         pp = self.params.platoon
         switch = self.switch_subframe(perfect)
         before = self.platoon
-        u = commands_mps2.to(device=self.device, dtype=torch.float32).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
+        u = commands_mps2.to(device=self.device, dtype=torch.float32).clamp(
+            pp.accel_min_mps2, pp.accel_max_mps2
+        )
         after = self.integrator.integrate(before, self.leader_accel_mps2(self.interval), u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
         reward = control_reward(gap_error, speed_error, u, before.command_mps2[:, 1:], pp)
@@ -407,10 +473,14 @@ class DigitalTwin:
 
         if self.radio_enabled:
             delay = self._delivery_subframes()
-            mean_rate = torch.as_tensor(self._v2i_rate_sum, device=self.device) / max(self.subframe, 1)
+            mean_rate = torch.as_tensor(self._v2i_rate_sum, device=self.device) / max(
+                self.subframe, 1
+            )
             delivered = delay <= t
             self.cam_held = torch.where(delivered[..., None], self.cam_snapshot, self.cam_held)
-            self.cam_held_interval = torch.where(delivered, self.interval[:, None], self.cam_held_interval)
+            self.cam_held_interval = torch.where(
+                delivered, self.interval[:, None], self.cam_held_interval
+            )
         else:
             delay = torch.zeros_like(switch)
             mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)

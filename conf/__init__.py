@@ -1,0 +1,1 @@
+"""Hydra config tree; installed as the package ``vdtn_marl.conf`` (see pyproject.toml)."""

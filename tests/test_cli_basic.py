@@ -1,0 +1,54 @@
+"""The small argparse CLI: `envs` table, `rollout` forwarding, usage errors."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+
+import pytest
+
+from vdtn_marl import cli
+
+BUILTIN_IDS = (
+    "vdtn/platoon-control-v0",
+    "vdtn/platoon-control-impaired-v0",
+    "vdtn/v2x-rra-v0",
+    "vdtn/vdtn-joint-v0",
+)
+
+
+def test_envs_prints_table_with_builtin_ids(capsys):
+    assert cli.main(["envs"]) == 0
+    out = capsys.readouterr().out
+    header = out.splitlines()[0]
+    for column in ("id", "agents", "clocks", "description", "data source"):
+        assert column in header
+    for env_id in BUILTIN_IDS:
+        assert env_id in out
+    assert "vehicle=50ms, rra=1ms" in out
+
+
+def test_envs_json(capsys):
+    assert cli.main(["envs", "--json"]) == 0
+    rows = {row["id"]: row for row in json.loads(capsys.readouterr().out)}
+    assert set(BUILTIN_IDS) <= set(rows)
+    assert rows["vdtn/vdtn-joint-v0"]["clocks"] == {"vehicle": 50, "rra": 1}
+    assert rows["vdtn/platoon-control-impaired-v0"]["kwargs"] == {"impaired": True}
+
+
+def test_rollout_forwards_all_arguments(monkeypatch):
+    seen = []
+    fake = types.ModuleType("vdtn_marl.rollout")
+    fake.main = lambda argv: seen.append(list(argv)) or 0
+    monkeypatch.setitem(sys.modules, "vdtn_marl.rollout", fake)
+    assert cli.main(["rollout", "--env", "vdtn/v2x-rra-v0", "--help"]) == 0
+    assert seen == [["--env", "vdtn/v2x-rra-v0", "--help"]]
+
+
+@pytest.mark.parametrize("argv", [["no-such-command"], []])
+def test_unknown_or_missing_command_is_usage_error(argv, capsys):
+    with pytest.raises(SystemExit) as info:
+        cli.main(argv)
+    assert info.value.code == 2
+    assert "usage:" in capsys.readouterr().err

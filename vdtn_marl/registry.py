@@ -1,0 +1,265 @@
+"""Environment registry: ``make``, ``register``, ``spec``, ``list_envs``.
+
+Ids have the form ``namespace/name-vN``. Entry points are either callables or strings
+``"module.path:ClassName"`` that are imported only when :func:`make` is called, so registering an
+environment never imports torch or the simulator.
+
+Third-party packages add environments through the ``vdtn_marl.envs`` entry-point group: every
+entry point in that group is a zero-argument callable that calls :func:`register`. The group is
+loaded once, on the first call of :func:`make`, :func:`list_envs` or :func:`spec`. A plugin that
+fails emits a :class:`PluginLoadWarning` and is skipped.
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib
+import re
+import threading
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from importlib import metadata
+from typing import Any
+
+__all__ = [
+    "ENTRY_POINT_GROUP",
+    "EnvSpec",
+    "PluginLoadWarning",
+    "UnknownEnvError",
+    "list_envs",
+    "make",
+    "register",
+    "spec",
+]
+
+ENTRY_POINT_GROUP = "vdtn_marl.envs"
+
+_ID_RE = re.compile(r"^[\w.-]+/[\w.-]+-v\d+$")
+_ID_FORM = "'namespace/name-vN' (e.g. 'vdtn/platoon-control-v0')"
+
+
+class UnknownEnvError(KeyError):
+    """Raised for an id that is not registered; the message lists the known ids."""
+
+    def __str__(self) -> str:  # KeyError would repr() the message
+        return str(self.args[0]) if self.args else ""
+
+
+class PluginLoadWarning(RuntimeWarning):
+    """A ``vdtn_marl.envs`` entry point could not be loaded; the registry stays usable."""
+
+
+@dataclass(frozen=True)
+class EnvSpec:
+    """Everything the registry knows about one environment id."""
+
+    id: str
+    entry_point: str | Callable[..., Any]
+    kwargs: dict[str, Any] = field(default_factory=dict, hash=False)
+    agents: str = ""
+    clocks: dict[str, int] = field(default_factory=dict, hash=False)
+    description: str = ""
+    data_source: str = ""
+
+    def load(self) -> Callable[..., Any]:
+        """Return the entry point callable, importing it if it is a ``"module:attr"`` string."""
+        if callable(self.entry_point):
+            return self.entry_point
+        module_name, _, attr_path = self.entry_point.partition(":")
+        try:
+            obj: Any = importlib.import_module(module_name)
+            for part in attr_path.split("."):
+                obj = getattr(obj, part)
+        except (ImportError, AttributeError) as exc:
+            raise ImportError(
+                f"cannot load entry point {self.entry_point!r} of env {self.id!r}: "
+                f"{type(exc).__name__}: {exc}"
+            ) from exc
+        return obj
+
+    def make(self, **kwargs: Any) -> Any:
+        """Instantiate the environment with the registered defaults updated by ``kwargs``."""
+        return self.load()(**{**self.kwargs, **kwargs})
+
+
+_REGISTRY: dict[str, EnvSpec] = {}
+_PLUGINS_LOADED = False
+_PLUGIN_LOCK = threading.RLock()
+
+
+def register(
+    env_id: str,
+    entry_point: str | Callable[..., Any],
+    *,
+    agents: str = "",
+    clocks: dict[str, int] | None = None,
+    description: str = "",
+    data_source: str = "",
+    override: bool = False,
+    **defaults: Any,
+) -> EnvSpec:
+    """Register ``env_id``; extra keyword arguments become the default constructor kwargs.
+
+    Raises ``ValueError`` for an id not of the form ``namespace/name-vN``, for a malformed
+    entry-point string, and for an id that is already registered (unless ``override=True``).
+    """
+    if not isinstance(env_id, str) or not _ID_RE.match(env_id):
+        raise ValueError(f"invalid env id {env_id!r}: expected the form {_ID_FORM}")
+    if isinstance(entry_point, str):
+        module_name, sep, attr_path = entry_point.partition(":")
+        if not (module_name and sep and attr_path):
+            raise ValueError(
+                f"invalid entry point {entry_point!r} for env {env_id!r}: "
+                "expected 'module.path:ClassName' or a callable"
+            )
+    elif not callable(entry_point):
+        raise TypeError(f"entry point of env {env_id!r} must be a string or a callable")
+    if env_id in _REGISTRY and not override:
+        raise ValueError(
+            f"env id {env_id!r} is already registered "
+            f"(entry point {_REGISTRY[env_id].entry_point!r}); pass override=True to replace it"
+        )
+    clocks = dict(clocks or {})
+    for kind, period in clocks.items():
+        if not isinstance(period, int) or isinstance(period, bool) or period < 1:
+            raise ValueError(
+                f"clock period of agent kind {kind!r} in env {env_id!r} must be a positive "
+                f"integer number of 1 ms subframes, got {period!r}"
+            )
+    env_spec = EnvSpec(
+        id=env_id,
+        entry_point=entry_point,
+        kwargs=dict(defaults),
+        agents=agents,
+        clocks=clocks,
+        description=description,
+        data_source=data_source,
+    )
+    _REGISTRY[env_id] = env_spec
+    return env_spec
+
+
+def make(env_id: str, **kwargs: Any) -> Any:
+    """Create the environment ``env_id``; ``kwargs`` override the registered defaults."""
+    return spec(env_id).make(**kwargs)
+
+
+def spec(env_id: str) -> EnvSpec:
+    """Return the :class:`EnvSpec` of ``env_id`` (raises :class:`UnknownEnvError`)."""
+    _load_plugins()
+    try:
+        return _REGISTRY[env_id]
+    except KeyError:
+        raise UnknownEnvError(_unknown_message(env_id)) from None
+
+
+def list_envs() -> list[str]:
+    """All registered ids, sorted."""
+    _load_plugins()
+    return sorted(_REGISTRY)
+
+
+def _unknown_message(env_id: object) -> str:
+    known = sorted(_REGISTRY)
+    msg = f"unknown env id {env_id!r}"
+    close = difflib.get_close_matches(str(env_id), known, n=1)
+    if close:
+        msg += f"; did you mean {close[0]!r}?"
+    return msg + f" known: {', '.join(known) if known else '(none)'}"
+
+
+def _load_plugins() -> None:
+    """Load the ``vdtn_marl.envs`` entry-point group once."""
+    global _PLUGINS_LOADED
+    if _PLUGINS_LOADED:
+        return
+    with _PLUGIN_LOCK:
+        if _PLUGINS_LOADED:
+            return
+        # Set first: a plugin that calls list_envs()/make() must not recurse into loading.
+        _PLUGINS_LOADED = True
+        try:
+            eps = list(metadata.entry_points(group=ENTRY_POINT_GROUP))
+        except Exception as exc:  # a broken distribution on sys.path
+            warnings.warn(
+                f"could not list the {ENTRY_POINT_GROUP!r} entry points: "
+                f"{type(exc).__name__}: {exc}",
+                PluginLoadWarning,
+                stacklevel=3,
+            )
+            return
+        for ep in eps:
+            dist = getattr(ep, "dist", None)
+            origin = f" from distribution {dist.name!r}" if dist is not None else ""
+            try:
+                hook = ep.load()
+                if not callable(hook):
+                    raise TypeError(f"{ep.value!r} is not callable")
+                hook()
+            except Exception as exc:
+                warnings.warn(
+                    f"vdtn_marl env plugin {ep.name!r} ({ep.value}){origin} failed and was "
+                    f"skipped: {type(exc).__name__}: {exc}",
+                    PluginLoadWarning,
+                    stacklevel=3,
+                )
+
+
+def _reset_plugins_for_tests() -> None:
+    """Forget that plugins were loaded so that the next registry call scans them again."""
+    global _PLUGINS_LOADED
+    with _PLUGIN_LOCK:
+        _PLUGINS_LOADED = False
+
+
+# --- built-in environments -----------------------------------------------------------------
+# Lazy string entry points: nothing below imports the simulator or torch.
+
+register(
+    "vdtn/platoon-control-v0",
+    "vdtn_marl.envs.control:PlatoonControlEnv",
+    agents="vehicle_1..vehicle_{N-1} (followers)",
+    clocks={"vehicle": 50},
+    description="platoon control, one step = one 50 ms control interval, perfect observation",
+    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    impaired=False,
+)
+register(
+    "vdtn/platoon-control-impaired-v0",
+    "vdtn_marl.envs.control:PlatoonControlEnv",
+    agents="vehicle_1..vehicle_{N-1} (followers)",
+    clocks={"vehicle": 50},
+    description=(
+        "platoon control, one step = one 50 ms control interval; observations arrive through "
+        "CAMs with the delay/loss of the C-V2X link layer, driven by an RRA policy "
+        "(random by default)"
+    ),
+    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    impaired=True,
+)
+register(
+    "vdtn/v2x-rra-v0",
+    "vdtn_marl.envs.radio:V2XRRAEnv",
+    agents="rra_1..rra_{N-1} (base-station RRA agent of each V2V link)",
+    clocks={"rra": 1},
+    description=(
+        "C-V2X radio resource allocation, one step = one 1 ms subframe; the platoon is driven "
+        "by a control module inside the environment"
+    ),
+    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+)
+register(
+    "vdtn/vdtn-joint-v0",
+    "vdtn_marl.envs.two_timescale:TwoTimescaleEnv",
+    agents=(
+        "vehicle_1..vehicle_{N-1} (followers, every 50 ms) and "
+        "rra_1..rra_{N-1} (RRA agent of each V2V link, every 1 ms)"
+    ),
+    clocks={"vehicle": 50, "rra": 1},
+    description=(
+        "joint two-timescale platoon control and C-V2X radio resource allocation; "
+        "vehicles act every 50 ms, RRA agents every 1 ms subframe"
+    ),
+    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+)
