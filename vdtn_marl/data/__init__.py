@@ -1,5 +1,40 @@
-"""Leader speed traces for the digital twin (docs/model.md §3)."""
+"""Leader speed traces for the digital twin (docs/model.md §3).
 
+Named trace sets (:func:`get_trace_source`): ``"synthetic"`` and ``"constant"`` always;
+``"udds"`` and ``"hwfet"`` (standard EPA driving cycles) where the optional ``fastsim`` package
+is installed. Recorded data the user has (NGSIM, highD-style tracks, ``time,speed`` CSV) is
+read with :func:`load_trace_source` / :class:`NGSIMTraceSource`.
+"""
+
+from vdtn_marl.data.cycles import (
+    CYCLES,
+    cycles_available,
+    driving_cycle_source,
+    load_driving_cycle,
+)
+from vdtn_marl.data.loaders import (
+    FT_TO_M,
+    MAX_SPEED_MPS,
+    SpeedProfile,
+    TraceFormatError,
+    load_highd,
+    load_ngsim,
+    load_time_speed_csv,
+)
+from vdtn_marl.data.preprocess import (
+    PreprocessReport,
+    limit_acceleration,
+    preprocess,
+    preprocess_all,
+)
+from vdtn_marl.data.profiles import (
+    SPLIT_VERSION,
+    NGSIMTraceSource,
+    ProfileTraceSource,
+    load_profiles,
+    load_trace_source,
+    split,
+)
 from vdtn_marl.data.traces import (
     ConstantSpeedTraceSource,
     SyntheticTraceSource,
@@ -10,12 +45,43 @@ from vdtn_marl.data.traces import (
     trace_source_names,
 )
 
+
+def _register_cycles() -> None:
+    if not cycles_available():
+        return
+    for name in CYCLES:
+        register_trace_source(name, lambda name=name: driving_cycle_source(name))
+
+
+_register_cycles()
+
 __all__ = [
+    "CYCLES",
+    "FT_TO_M",
+    "MAX_SPEED_MPS",
+    "SPLIT_VERSION",
     "ConstantSpeedTraceSource",
+    "NGSIMTraceSource",
+    "PreprocessReport",
+    "ProfileTraceSource",
+    "SpeedProfile",
     "SyntheticTraceSource",
+    "TraceFormatError",
     "TraceInfo",
     "TraceSource",
+    "cycles_available",
+    "driving_cycle_source",
     "get_trace_source",
+    "limit_acceleration",
+    "load_driving_cycle",
+    "load_highd",
+    "load_ngsim",
+    "load_profiles",
+    "load_time_speed_csv",
+    "load_trace_source",
+    "preprocess",
+    "preprocess_all",
     "register_trace_source",
+    "split",
     "trace_source_names",
 ]

@@ -1,0 +1,241 @@
+"""Recorded speed profiles as a :class:`~vdtn_marl.data.traces.TraceSource`, and the split rule.
+
+:class:`ProfileTraceSource` cuts random windows out of a fixed list of
+:class:`~vdtn_marl.data.loaders.SpeedProfile`; :func:`split` divides profiles into a train and
+an eval part by a fixed, versioned rule; :func:`load_trace_source` builds a source from a file.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import torch
+
+from vdtn_marl.data.loaders import LOADERS, SpeedProfile
+from vdtn_marl.data.preprocess import preprocess_all
+from vdtn_marl.data.traces import TraceInfo
+
+SPLIT_VERSION = "1"
+"""Version of the train/eval rule in :func:`split`; changing the rule means bumping this."""
+EVAL_MODULUS = 5
+"""One profile in ``EVAL_MODULUS`` (by hash) goes to the eval part: a 80/20 split."""
+
+Part = Literal["train", "eval", "all"]
+TooShort = Literal["raise", "reflect"]
+
+
+def split_key(vehicle_id: str) -> str:
+    """The id the split hashes: ``vehicle_id`` less a ``#k`` segment suffix from preprocessing.
+
+    So all segments of one vehicle land in the same part.
+    """
+    return re.sub(r"#\d+$", "", vehicle_id)
+
+
+def is_eval(vehicle_id: str) -> bool:
+    """Split rule v1: eval iff ``sha256("1:" + split_key(id))`` as an integer is ≡ 0 mod 5."""
+    digest = hashlib.sha256(f"{SPLIT_VERSION}:{split_key(vehicle_id)}".encode()).hexdigest()
+    return int(digest, 16) % EVAL_MODULUS == 0
+
+
+def split(profiles: Sequence[SpeedProfile], part: Part = "train") -> list[SpeedProfile]:
+    """Profiles of one part of the deterministic train/eval split (order kept).
+
+    The rule depends only on each ``vehicle_id`` and :data:`SPLIT_VERSION` (see
+    :func:`is_eval`), so the parts are disjoint, stable across runs and machines, and a
+    profile's part does not change when other profiles are added. ``part="all"`` returns all.
+    """
+    if part == "all":
+        return list(profiles)
+    if part not in ("train", "eval"):
+        raise ValueError(f"part={part!r} must be 'train', 'eval' or 'all'")
+    want_eval = part == "eval"
+    return [p for p in profiles if is_eval(p.vehicle_id) == want_eval]
+
+
+class ProfileTraceSource:
+    """Hands out random windows of recorded speed profiles, resampled to the caller's grid.
+
+    For each trace, a profile is picked uniformly (every profile equally likely, whatever its
+    length) among those long enough for ``(num_points − 1)·dt_s`` seconds, then a start offset
+    is drawn uniformly so the window fits, and the speed is linearly interpolated at
+    ``offset + j·dt_s``. All draws come from the caller's generator.
+
+    If no profile is long enough, ``too_short="raise"`` (default) raises a ``ValueError``
+    naming the longest profile; ``too_short="reflect"`` instead makes every profile usable by
+    playing it forward, then backward, then forward again… (speed stays continuous; the
+    acceleration changes sign at each turn), with the offset drawn over one period.
+    """
+
+    def __init__(
+        self,
+        profiles: Sequence[SpeedProfile],
+        info: TraceInfo | None = None,
+        *,
+        too_short: TooShort = "raise",
+    ) -> None:
+        if too_short not in ("raise", "reflect"):
+            raise ValueError(f"too_short={too_short!r} must be 'raise' or 'reflect'")
+        usable = [p for p in profiles if len(p) >= 2 and p.duration_s > 0]
+        if not usable:
+            raise ValueError("ProfileTraceSource needs at least one profile with >= 2 samples")
+        for p in usable:
+            if np.any(np.diff(p.time_s) <= 0) or not np.all(np.isfinite(p.speed_mps)):
+                raise ValueError(
+                    f"profile {p.vehicle_id!r} needs strictly increasing times and finite "
+                    "speeds: run vdtn_marl.data.preprocess.preprocess on it first"
+                )
+            if np.any(p.speed_mps < 0):
+                raise ValueError(f"profile {p.vehicle_id!r} has negative speeds")
+        self.profiles = usable
+        self.too_short = too_short
+        self._times = [p.time_s - p.time_s[0] for p in usable]
+        self._durations = np.array([p.duration_s for p in usable])
+        self.info = info or TraceInfo(
+            name="profiles",
+            description=f"{len(usable)} recorded speed profiles",
+            synthetic=False,
+            source="; ".join(sorted({p.source for p in usable})),
+        )
+
+    def __len__(self) -> int:
+        return len(self.profiles)
+
+    def sample(
+        self, num_traces: int, num_points: int, dt_s: float, generator: torch.Generator
+    ) -> torch.Tensor:
+        if num_traces < 1 or num_points < 2 or not dt_s > 0:
+            raise ValueError(
+                f"num_traces={num_traces}, num_points={num_points}, dt_s={dt_s} must be "
+                ">= 1, >= 2 and > 0"
+            )
+        span = (num_points - 1) * dt_s
+        if self.too_short == "reflect":
+            eligible = np.arange(len(self.profiles))
+        else:
+            eligible = np.flatnonzero(self._durations >= span - 1e-9)
+            if eligible.size == 0:
+                longest = int(np.argmax(self._durations))
+                raise ValueError(
+                    f"trace set {self.info.name!r}: no profile covers {span:g} s "
+                    f"({num_points} points at dt {dt_s:g} s); the longest, "
+                    f"{self.profiles[longest].vehicle_id!r}, lasts "
+                    f"{self._durations[longest]:g} s. Use shorter episodes, more data, or "
+                    "too_short='reflect'"
+                )
+        dev = generator.device
+        pick = torch.randint(len(eligible), (num_traces,), generator=generator, device=dev)
+        frac = torch.rand(num_traces, generator=generator, device=dev, dtype=torch.float64)
+        pick_np, frac_np = pick.cpu().numpy(), frac.cpu().numpy()
+        grid = dt_s * np.arange(num_points)
+        out = np.empty((num_traces, num_points))
+        for n in range(num_traces):
+            i = int(eligible[pick_np[n]])
+            dur = self._durations[i]
+            if dur >= span - 1e-9:
+                t = frac_np[n] * max(dur - span, 0.0) + grid
+                t = np.minimum(t, dur)
+            else:  # reflect: period 2·dur, offset anywhere in one period
+                phase = np.mod(frac_np[n] * 2.0 * dur + grid, 2.0 * dur)
+                t = np.where(phase > dur, 2.0 * dur - phase, phase)
+            out[n] = np.interp(t, self._times[i], self.profiles[i].speed_mps)
+        return torch.as_tensor(out, dtype=torch.get_default_dtype()).to(dev)
+
+
+def load_profiles(
+    kind: str,
+    path: str | Path,
+    *,
+    part: Part = "all",
+    clean: bool = True,
+    preprocess_kw: dict[str, Any] | None = None,
+    **loader_kw: Any,
+) -> list[SpeedProfile]:
+    """Read a file (``kind`` ``"ngsim"``, ``"highd"`` or ``"csv"``), clean it, keep one part.
+
+    ``loader_kw`` go to the reader (e.g. ``vehicle_ids``, ``min_duration_s``,
+    ``speed_range_mps``), ``preprocess_kw`` to :func:`~vdtn_marl.data.preprocess.preprocess`.
+    """
+    try:
+        loader = LOADERS[kind]
+    except KeyError:
+        raise ValueError(f"kind={kind!r} must be one of {', '.join(sorted(LOADERS))}") from None
+    profiles = loader(path, **loader_kw)
+    if clean:
+        profiles, _ = preprocess_all(profiles, **(preprocess_kw or {}))
+    return split(profiles, part)
+
+
+def load_trace_source(
+    kind: str,
+    path: str | Path,
+    *,
+    part: Part = "all",
+    too_short: TooShort = "raise",
+    clean: bool = True,
+    preprocess_kw: dict[str, Any] | None = None,
+    **loader_kw: Any,
+) -> ProfileTraceSource:
+    """A :class:`ProfileTraceSource` over a user's file; arguments as in :func:`load_profiles`.
+
+    Example: ``load_trace_source("ngsim", "trajectories-0750am-0805am.csv", part="train",
+    min_duration_s=60, speed_range_mps=(5, 30))``.
+    """
+    profiles = load_profiles(
+        kind, path, part=part, clean=clean, preprocess_kw=preprocess_kw, **loader_kw
+    )
+    if not profiles:
+        raise ValueError(
+            f"{Path(path).name}: no {kind} profile left after selection, cleaning and "
+            f"part={part!r}; loosen the selection (e.g. min_duration_s, speed_range_mps)"
+        )
+    info = TraceInfo(
+        name=f"{kind}:{Path(path).name}",
+        description=f"{len(profiles)} {kind} speed profiles from {Path(path).name} "
+        f"(part={part}, split v{SPLIT_VERSION})",
+        synthetic=False,
+        source=profiles[0].source,
+    )
+    return ProfileTraceSource(profiles, info, too_short=too_short)
+
+
+class NGSIMTraceSource(ProfileTraceSource):
+    """Leader traces from an NGSIM trajectory file the user has (never downloaded here).
+
+    ``NGSIMTraceSource(path, vehicle_ids=None, part="train", min_duration_s=30.0, ...)``:
+    selection keywords go to :func:`~vdtn_marl.data.loaders.load_ngsim`, cleaning is
+    :func:`~vdtn_marl.data.preprocess.preprocess` with ``preprocess_kw``.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        vehicle_ids: Sequence[str | int] | None = None,
+        *,
+        part: Part = "all",
+        too_short: TooShort = "raise",
+        preprocess_kw: dict[str, Any] | None = None,
+        **loader_kw: Any,
+    ) -> None:
+        src = load_trace_source(
+            "ngsim",
+            path,
+            part=part,
+            too_short=too_short,
+            preprocess_kw=preprocess_kw,
+            vehicle_ids=vehicle_ids,
+            **loader_kw,
+        )
+        info = TraceInfo(
+            name="ngsim",
+            description=src.info.description,
+            synthetic=False,
+            source="NGSIM vehicle trajectories (U.S. DOT FHWA, Next Generation Simulation), "
+            f"file {Path(path).name}",
+        )
+        super().__init__(src.profiles, info, too_short=too_short)
