@@ -1,0 +1,499 @@
+"""Batched TorchRL face of the digital twin: :class:`VDTNTorchRLEnv`.
+
+One :class:`~torchrl.envs.EnvBase` over one :class:`~vdtn_marl.sim.twin.DigitalTwin` with
+``backend="torch"`` and B scenarios (``batch_size=[B]``), on any torch device. It follows the
+TorchRL multi-agent convention: one nested group per agent kind.
+
+- ``"control"``: group ``vehicle``; one step = one control interval, perfect observation
+  (the PettingZoo ``PlatoonControlEnv``).
+- ``"control_impaired"``: group ``vehicle``; one step = one control interval; before the
+  followers decide, the interval's T radio subframes run with ``rra_policy``
+  (``PlatoonControlEnv(impaired=True)``).
+- ``"rra"``: group ``rra``; one step = one subframe; the followers are driven inside by
+  ``control_module`` (``V2XRRAEnv``).
+- ``"joint"``: groups ``vehicle`` and ``rra``; one step = one subframe; vehicle actions are read
+  only at the step that closes the interval (twin subframe T−1), announced by the
+  ``("vehicle", "acts")`` observation (``TwoTimescaleEnv``).
+
+Keys: ``(group, "observation")``, ``(group, "action")``, ``(group, "reward")`` and
+``done``/``terminated``/``truncated`` at the root ([B, 1]) and per group ([B, F, 1] or
+[B, L, 1]). A collision of any follower terminates the scenario for every agent; truncation
+after ``episode_intervals`` intervals. Partial resets use the ``"_reset"`` entries.
+
+All scenarios share the twin's subframe clock. Scenarios finish at the closing subframe of an
+interval, where every scenario is at subframe 0 of the next one, so automatic resets keep the
+batch in step. A scenario reset explicitly in the middle of an interval (``"rra"``/``"joint"``)
+joins the batch at the current subframe: its first interval is shorter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from torchrl.data import Bounded, Categorical, Composite, Unbounded
+from torchrl.envs import EnvBase
+
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.envs.base import rra_observation_space, vehicle_observation_space
+from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.link import LinkState
+from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.twin import DigitalTwin, resolve_device
+from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+
+MODES = ("control", "control_impaired", "rra", "joint")
+
+
+def _batch_size(batch_size: int | Sequence[int] | torch.Size) -> int:
+    if isinstance(batch_size, torch.Size | list | tuple):
+        if len(batch_size) != 1:
+            raise ConfigError(f"batch_size={batch_size!r} must be one integer B >= 1 (or [B])")
+        batch_size = batch_size[0]
+    if isinstance(batch_size, bool) or not isinstance(batch_size, int) or batch_size < 1:
+        raise ConfigError(f"batch_size={batch_size!r} must be an integer >= 1")
+    return int(batch_size)
+
+
+class VDTNTorchRLEnv(EnvBase):
+    """B scenarios of the VDTN benchmark as one batched TorchRL environment (see module doc).
+
+    Args:
+        mode: ``"control"``, ``"control_impaired"``, ``"rra"`` or ``"joint"``.
+        batch_size: B ≥ 1 scenarios (an int or ``[B]``).
+        device: torch device of the twin and of every tensor.
+        seed: seed of the twin (and of the default random RRA policy).
+        rra_policy: ``"control_impaired"`` only: RRA observations [B, L, D] → long [B, L]
+            (default: uniformly random).
+        control_module: ``"rra"`` only: impaired vehicle observations [B, F, 8] → commands
+            [B, F] (default: linear CACC).
+        reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty: the RRA reward
+            (:class:`~vdtn_marl.envs.rra_reward.RRAReward`), ``"rra"``/``"joint"`` only.
+        ivoi_estimator, ivoi_horizon_intervals: the VoI estimator (:mod:`vdtn_marl.voi`).
+        trace_source: leader trace set (default: the model's ``traces``).
+        **model_kwargs: model parameters for :meth:`TwinParams.from_overrides`
+            (e.g. ``num_vehicles=6``, ``episode_intervals=100``).
+    """
+
+    batch_locked = True
+
+    def __init__(
+        self,
+        mode: str = "control",
+        batch_size: int | Sequence[int] | torch.Size = 1,
+        device: str | torch.device = "cpu",
+        seed: int | None = None,
+        rra_policy: Callable | None = None,
+        control_module: Callable | None = None,
+        reward: str = "jocc",
+        kappa1: float = 0.5,
+        kappa2: float | None = None,
+        ivoi_estimator: str | IVoIEstimator = "rollout",
+        ivoi_horizon_intervals: int = 10,
+        throughput_scale: float = 0.004,
+        ivoi_scale: float = 20.0,
+        miss_penalty: float = 1.0,
+        trace_source: str | TraceSource | None = None,
+        **model_kwargs,
+    ):
+        if mode not in MODES:
+            raise ConfigError(f"mode={mode!r} must be one of {MODES}")
+        b = _batch_size(batch_size)
+        dev = resolve_device(device)
+        super().__init__(device=dev, batch_size=torch.Size([b]))
+        self.mode = mode
+        self.has_vehicles = mode != "rra"
+        self.has_rra = mode in ("rra", "joint")
+        self.impaired = mode != "control"  # CAMs cross the radio in every mode but "control"
+        params = TwinParams.from_overrides(**model_kwargs)
+        self.twin = DigitalTwin(
+            params,
+            batch_size=b,
+            device=dev,
+            seed=seed,
+            trace_source=trace_source,
+            radio=self.impaired,
+            backend="torch",
+        )
+        twin = self.twin
+        self.num_scenarios = b
+        self.num_followers = twin.num_followers
+        self.num_links = twin.num_links
+        self.num_actions = params.radio.num_actions
+        pp = params.platoon
+        self.accel_min_mps2, self.accel_max_mps2 = (
+            float(pp.accel_min_mps2),
+            float(pp.accel_max_mps2),
+        )
+
+        self.rra_policy = None
+        if mode == "control_impaired":
+            self.rra_policy = rra_policy or RandomRRAPolicy(self.num_actions, seed)
+            if not callable(self.rra_policy):
+                raise TypeError(
+                    f"rra_policy={rra_policy!r} must be callable: "
+                    "observations [B, L, D] -> actions [B, L]"
+                )
+        elif rra_policy is not None:
+            raise ConfigError(
+                f"rra_policy is only used with mode='control_impaired', not mode={mode!r}"
+            )
+
+        self.control_module = None
+        if mode == "rra":
+            self.control_module = control_module or CACCController(pp)
+            if not callable(self.control_module):
+                raise TypeError(
+                    f"control_module={control_module!r} must be callable: observations -> commands"
+                )
+        elif control_module is not None:
+            raise ConfigError(f"control_module is only used with mode='rra', not mode={mode!r}")
+
+        self.reward_fn = None
+        self.ivoi_estimator = None
+        if self.has_rra:
+            self.reward_fn = RRAReward(
+                reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
+            )
+            estimator_kwargs = (
+                {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
+            )
+            self.ivoi_estimator = make_ivoi_estimator(
+                ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
+            )
+        self._bandwidth_hz = params.radio.subchannel_bandwidth_hz
+        self._subframe_s = pp.subframe_s
+        self._vehicle_obs: torch.Tensor | None = None
+        self._make_specs()
+
+    # ------------------------------------------------------------------ specs
+    def _make_specs(self) -> None:
+        b, f, n_l, dev = self.num_scenarios, self.num_followers, self.num_links, self.device
+        veh_box = vehicle_observation_space(self.twin)
+        rra_box = rra_observation_space(self.twin)
+
+        def bounded(box, shape):
+            low = torch.as_tensor(box.low, dtype=torch.float32, device=dev).expand(shape)
+            high = torch.as_tensor(box.high, dtype=torch.float32, device=dev).expand(shape)
+            return Bounded(
+                low=low.clone(), high=high.clone(), shape=shape, dtype=torch.float32, device=dev
+            )
+
+        def flags(shape):
+            return Categorical(n=2, shape=shape, dtype=torch.bool, device=dev)
+
+        def done_group(shape):
+            return {k: flags(shape) for k in ("done", "terminated", "truncated")}
+
+        obs, act, rew = {}, {}, {}
+        done = done_group((b, 1))
+        if self.has_vehicles:
+            group = (b, f)
+            vehicle_obs = {"observation": bounded(veh_box, (b, f, veh_box.shape[0]))}
+            if self.mode == "joint":
+                vehicle_obs["acts"] = flags((b, f, 1))
+            obs["vehicle"] = Composite(vehicle_obs, shape=group, device=dev)
+            act["vehicle"] = Composite(
+                action=Bounded(
+                    low=self.accel_min_mps2,
+                    high=self.accel_max_mps2,
+                    shape=(b, f, 1),
+                    dtype=torch.float32,
+                    device=dev,
+                ),
+                shape=group,
+                device=dev,
+            )
+            rew["vehicle"] = Composite(
+                reward=Unbounded(shape=(b, f, 1), dtype=torch.float32, device=dev),
+                shape=group,
+                device=dev,
+            )
+            done["vehicle"] = Composite(done_group((b, f, 1)), shape=group, device=dev)
+        if self.has_rra:
+            group = (b, n_l)
+            obs["rra"] = Composite(
+                observation=bounded(rra_box, (b, n_l, rra_box.shape[0])), shape=group, device=dev
+            )
+            act["rra"] = Composite(
+                action=Categorical(n=self.num_actions, shape=group, dtype=torch.long, device=dev),
+                shape=group,
+                device=dev,
+            )
+            rew["rra"] = Composite(
+                reward=Unbounded(shape=(b, n_l, 1), dtype=torch.float32, device=dev),
+                shape=group,
+                device=dev,
+            )
+            done["rra"] = Composite(done_group((b, n_l, 1)), shape=group, device=dev)
+        self.full_observation_spec = Composite(obs, shape=(b,), device=dev)
+        self.full_action_spec = Composite(act, shape=(b,), device=dev)
+        self.full_reward_spec = Composite(rew, shape=(b,), device=dev)
+        self.full_done_spec = Composite(done, shape=(b,), device=dev)
+
+    # ------------------------------------------------------------------ seeding
+    def _set_seed(self, seed: int | None) -> None:
+        self.twin.seed(seed)
+        if self.rra_policy is not None and hasattr(self.rra_policy, "seed"):
+            self.rra_policy.seed(seed)
+
+    # ------------------------------------------------------------------ actions
+    def _vehicle_commands(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Validated commands [B, F] (m/s²) from ``("vehicle", "action")`` [B, F, 1]."""
+        action = tensordict.get(("vehicle", "action"), None)
+        expected = (self.num_scenarios, self.num_followers, 1)
+        lo, hi = self.accel_min_mps2, self.accel_max_mps2
+        if action is None:
+            raise KeyError("missing ('vehicle', 'action') in the step tensordict")
+        action = torch.as_tensor(action, device=self.device)
+        if tuple(action.shape) != expected:
+            raise ValueError(
+                f"('vehicle', 'action') has shape {tuple(action.shape)}, expected {expected}"
+            )
+        if action.dtype == torch.bool or action.is_complex():
+            raise ValueError(
+                f"('vehicle', 'action') has dtype {action.dtype}; "
+                f"expected real m/s² in [{lo}, {hi}]"
+            )
+        wide = action.double()
+        bad = ~((wide >= lo) & (wide <= hi))  # NaN compares False: rejected too
+        if bool(bad.any()):
+            first = bad.nonzero()[0].tolist()
+            raise ValueError(
+                f"vehicle action {wide[tuple(first)].item()!r} m/s² (scenario {first[0]}, "
+                f"follower {first[1] + 1}) is outside [{lo}, {hi}]"
+            )
+        return action.reshape(expected[:2]).to(torch.float32)
+
+    def _rra_actions(self, tensordict: TensorDictBase) -> torch.Tensor:
+        """Validated RRA actions [B, L] (long) from ``("rra", "action")``."""
+        action = tensordict.get(("rra", "action"), None)
+        expected = (self.num_scenarios, self.num_links)
+        top = self.num_actions - 1
+        if action is None:
+            raise KeyError("missing ('rra', 'action') in the step tensordict")
+        action = torch.as_tensor(action, device=self.device)
+        if tuple(action.shape) != expected:
+            raise ValueError(
+                f"('rra', 'action') has shape {tuple(action.shape)}, expected {expected}"
+            )
+        if action.dtype.is_floating_point or action.is_complex() or action.dtype == torch.bool:
+            raise ValueError(
+                f"('rra', 'action') has dtype {action.dtype}; expected integers in [0, {top}] "
+                "(sub-channel × power level)"
+            )
+        bad = (action < 0) | (action > top)
+        if bool(bad.any()):
+            first = bad.nonzero()[0].tolist()
+            raise ValueError(
+                f"RRA action {action[tuple(first)].item()} "
+                f"(scenario {first[0]}, link {first[1] + 1}) "
+                f"is outside [0, {top}] (sub-channel × power level)"
+            )
+        return action.long()
+
+    # ------------------------------------------------------------------ radio
+    def _run_radio(self, mask: torch.Tensor | None = None) -> None:
+        """Run the interval's T subframes with ``rra_policy``; with ``mask`` [B] only the masked
+        scenarios keep the result (the others had already run this interval)."""
+        twin = self.twin
+        if mask is not None:
+            saved = LinkState(
+                *(
+                    t.clone()
+                    for t in (
+                        twin.link_state.remaining_bits,
+                        twin.link_state.delay_subframes,
+                        twin.link_state.occupancy,
+                    )
+                )
+            )
+            saved_rate = twin._v2i_rate_sum.clone()
+        for _ in range(twin.subframes_per_interval):
+            actions = self.rra_policy(twin.rra_observation())
+            twin.step_subframe(torch.as_tensor(actions, device=self.device).long())
+        if mask is not None:
+            keep = ~mask
+            ls = twin.link_state
+            twin.link_state = LinkState(
+                torch.where(keep[:, None], saved.remaining_bits, ls.remaining_bits),
+                torch.where(keep[:, None], saved.delay_subframes, ls.delay_subframes),
+                torch.where(keep[:, None], saved.occupancy, ls.occupancy),
+            )
+            twin._v2i_rate_sum = torch.where(keep[:, None], saved_rate, twin._v2i_rate_sum)
+
+    # ------------------------------------------------------------------ outputs
+    def _vehicle_acts(self) -> torch.Tensor:
+        acts = self.twin.subframe == self.twin.subframes_per_interval - 1
+        return torch.full(
+            (self.num_scenarios, self.num_followers, 1), acts, dtype=torch.bool, device=self.device
+        )
+
+    def _output(
+        self, vehicle_obs, rra_obs, vehicle_reward, rra_reward, terminated, truncated
+    ) -> TensorDict:
+        b, f, n_l = self.num_scenarios, self.num_followers, self.num_links
+        term = terminated[:, None]
+        trunc = truncated[:, None]
+        done = term | trunc
+        out = {"done": done, "terminated": term, "truncated": trunc}
+
+        def group(n, extra):
+            flags = {
+                "done": done[:, None].expand(b, n, 1).clone(),
+                "terminated": term[:, None].expand(b, n, 1).clone(),
+                "truncated": trunc[:, None].expand(b, n, 1).clone(),
+            }
+            return TensorDict({**extra, **flags}, batch_size=(b, n), device=self.device)
+
+        if self.has_vehicles:
+            extra = {"observation": vehicle_obs}
+            if self.mode == "joint":
+                extra["acts"] = self._vehicle_acts()
+            if vehicle_reward is not None:
+                extra["reward"] = vehicle_reward.to(torch.float32)[..., None]
+            out["vehicle"] = group(f, extra)
+        if self.has_rra:
+            extra = {"observation": rra_obs}
+            if rra_reward is not None:
+                extra["reward"] = rra_reward.to(torch.float32)[..., None]
+            out["rra"] = group(n_l, extra)
+        return TensorDict(out, batch_size=(b,), device=self.device)
+
+    # ------------------------------------------------------------------ reset
+    def _reset_mask(self, tensordict: TensorDictBase | None) -> torch.Tensor | None:
+        if tensordict is None:
+            return None
+        parts = []
+        for key in self.reset_keys:
+            value = tensordict.get(key, None)
+            if value is not None:
+                parts.append(
+                    torch.as_tensor(value, device=self.device)
+                    .reshape(self.num_scenarios, -1)
+                    .any(-1)
+                )
+        if not parts:
+            return None
+        return torch.stack(parts).any(0)
+
+    def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
+        twin = self.twin
+        mask = self._reset_mask(tensordict)
+        full = mask is None or bool(mask.all())
+        if full:
+            twin.reset()
+            if self.mode == "control_impaired":
+                self._run_radio()
+        elif bool(mask.any()):
+            subframe = twin.subframe
+            twin.reset(mask=mask)
+            if self.mode == "control_impaired":
+                self._run_radio(mask)
+            elif self.has_rra and subframe < twin.subframes_per_interval:
+                twin.subframe = subframe  # the shared clock stays where the other scenarios are
+
+        vehicle_obs = rra_obs = None
+        if self.has_vehicles:
+            fresh = twin.vehicle_observation(perfect=not self.impaired)
+            if self.mode == "joint":
+                if full or self._vehicle_obs is None:
+                    self._vehicle_obs = fresh
+                else:
+                    self._vehicle_obs = torch.where(mask[:, None, None], fresh, self._vehicle_obs)
+                vehicle_obs = self._vehicle_obs.clone()
+            else:
+                vehicle_obs = fresh
+        if self.has_rra:
+            rra_obs = twin.rra_observation().clone()
+        false = torch.zeros(self.num_scenarios, dtype=torch.bool, device=self.device)
+        return self._output(vehicle_obs, rra_obs, None, None, false, false)
+
+    # ------------------------------------------------------------------ step
+    def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        if self.has_rra:
+            return self._step_subframe(tensordict)
+        return self._step_interval(tensordict)
+
+    def _finish(self, record) -> tuple[torch.Tensor, torch.Tensor]:
+        terminated = record.collided.any(-1)
+        truncated = record.truncated & ~terminated
+        return terminated, truncated
+
+    def _step_interval(self, tensordict: TensorDictBase) -> TensorDictBase:
+        twin = self.twin
+        perfect = not self.impaired
+        commands = self._vehicle_commands(tensordict)
+        record = twin.finish_interval(commands, perfect=perfect)
+        terminated, truncated = self._finish(record)
+        going = ~(terminated | truncated)
+        all_going = bool(going.all())
+        final_obs = None
+        if self.impaired and not all_going:
+            final_obs = twin.vehicle_observation(perfect=False)  # what finished scenarios saw last
+        if all_going:
+            twin.begin_interval()
+            if self.impaired:
+                self._run_radio()
+        elif bool(going.any()):
+            twin.begin_interval(going)
+            if self.impaired:
+                self._run_radio(going)
+        obs = twin.vehicle_observation(perfect=perfect)
+        if final_obs is not None:
+            obs = torch.where(going[:, None, None], obs, final_obs)
+        return self._output(obs, None, record.reward, None, terminated, truncated)
+
+    def _step_subframe(self, tensordict: TensorDictBase) -> TensorDictBase:
+        twin = self.twin
+        last = twin.subframes_per_interval - 1
+        closing = twin.subframe == last
+        rra_actions = self._rra_actions(tensordict)
+        commands = self._vehicle_commands(tensordict) if closing and self.has_vehicles else None
+
+        outcome = twin.step_subframe(rra_actions)
+        rra_reward = self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s).to(
+            torch.float32
+        )
+        b = self.num_scenarios
+        terminated = torch.zeros(b, dtype=torch.bool, device=self.device)
+        truncated = terminated.clone()
+        vehicle_reward = (
+            torch.zeros(b, self.num_followers, device=self.device) if self.has_vehicles else None
+        )
+        going = None
+        final_rra_obs = None
+        if closing:
+            if commands is None:
+                commands = self.control_module(twin.vehicle_observation(perfect=False))
+            record = twin.finish_interval(commands, perfect=False)
+            xi = self.ivoi_estimator(twin, record)
+            lost = record.cam_delay_subframes > twin.subframes_per_interval
+            rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost).to(torch.float32)
+            if vehicle_reward is not None:
+                vehicle_reward = record.reward
+            terminated, truncated = self._finish(record)
+            going = ~(terminated | truncated)
+            if bool(going.all()):
+                twin.begin_interval()
+            else:
+                final_rra_obs = twin.rra_observation().clone()
+                if bool(going.any()):
+                    twin.begin_interval(going)
+        vehicle_obs = None
+        if self.has_vehicles:
+            if twin.subframe == last:
+                fresh = twin.vehicle_observation(perfect=False)
+                self._vehicle_obs = (
+                    fresh
+                    if going is None
+                    else torch.where(going[:, None, None], fresh, self._vehicle_obs)
+                )
+            vehicle_obs = self._vehicle_obs.clone()
+        rra_obs = twin.rra_observation().clone()
+        if final_rra_obs is not None:
+            rra_obs = torch.where(going[:, None, None], rra_obs, final_rra_obs)
+        return self._output(vehicle_obs, rra_obs, vehicle_reward, rra_reward, terminated, truncated)
