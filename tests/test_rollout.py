@@ -10,7 +10,9 @@ def test_rollout_reports_every_metric():
     assert results["control intervals"] == 3
     assert 0.5 < results["V2I throughput per link (Mbps)"] < 5.0
     assert 0.0 <= results["CAM delivery rate"] <= 1.0
-    assert results["mean IVoI per interval"] <= 1e-6 or math.isnan(results["mean IVoI per interval"])
+    assert results["mean IVoI per interval"] <= 1e-6 or math.isnan(
+        results["mean IVoI per interval"]
+    )
 
 
 def test_rollout_cli_prints_table(capsys):
