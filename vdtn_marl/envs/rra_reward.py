@@ -54,7 +54,7 @@ class RRAReward:
         return outcome.v2i_rate_bps.sum(axis=-1) * 1e-6
 
     def per_subframe(self, outcome: SubframeOutcome, bandwidth_hz: float, subframe_s: float):
-        """Reward of every RRA agent for this subframe, [B, L]."""
+        """Reward of every RRA agent for this subframe [B, L], and g (Mbps) [B]."""
         xp = np if isinstance(outcome.v2v_bits, np.ndarray) else torch
         g = self.v2i_throughput_mbps(outcome)
         reward = (self.kappa1 * self.throughput_scale) * g[:, None] * xp.ones_like(outcome.v2v_bits)
@@ -63,7 +63,7 @@ class RRAReward:
             done = outcome.delivered_now | ~outcome.was_pending
             progress = xp.where(done, 1.0, efficiency / 10.0)
             reward = reward + self.kappa2 * progress
-        return reward
+        return reward, g
 
     def at_interval_end(self, ivoi: torch.Tensor, cam_lost: torch.Tensor) -> torch.Tensor:
         """Extra reward at the last subframe, [B, L] (torch): κ2·s_ξ·ξ or the DRRA miss penalty."""

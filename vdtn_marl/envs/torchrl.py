@@ -454,10 +454,9 @@ class VDTNTorchRLEnv(EnvBase):
         rra_actions = self._rra_actions(tensordict)
         commands = self._vehicle_commands(tensordict) if closing and self.has_vehicles else None
 
-        outcome = twin.step_subframe(rra_actions)
-        rra_reward = self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s).to(
-            torch.float32
-        )
+        outcome = twin.step_subframe(rra_actions, validated=True)
+        rra_reward, _ = self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
+        rra_reward = rra_reward.to(torch.float32)
         b = self.num_scenarios
         terminated = torch.zeros(b, dtype=torch.bool, device=self.device)
         truncated = terminated.clone()

@@ -182,11 +182,12 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         if closes_interval and self.vehicles_are_agents:
             commands = torch.as_tensor(self._vehicle_commands(actions, self.vehicle_agents))[None]
 
-        outcome = twin.step_subframe(self._to_twin(rra_actions))
-        rra_reward = self._as_numpy(
-            self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
-        )[0].astype(np.float64)
-        throughput_mbps = float(self._as_numpy(self.reward_fn.v2i_throughput_mbps(outcome))[0])
+        outcome = twin.step_subframe(self._to_twin(rra_actions), validated=True)
+        reward, throughput = self.reward_fn.per_subframe(
+            outcome, self._bandwidth_hz, self._subframe_s
+        )
+        rra_reward = self._as_numpy(reward)[0].astype(np.float64)
+        throughput_mbps = float(self._as_numpy(throughput)[0])
         vehicle_reward = [0.0] * twin.num_followers
         terminated = truncated = False
         closing = ivoi = None

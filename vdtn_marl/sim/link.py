@@ -192,25 +192,20 @@ class KernelConstants:
     noise_mw: float
     bandwidth_hz: float
     subframe_s: float
-    batch_index: Array  # [B, 1]
-    link_index: Array  # [1, L]
+    row_offset: Array  # [B, L] int64: flat index of (b, l, 0) in a contiguous [B, L, M] array
 
     @classmethod
     def build(cls, radio: RadioParams, subframe_s: float, batch: int, links: int, device):
+        rows = torch.arange(batch * links, device=device).reshape(batch, links)
         return cls(
             noise_mw=float(db_to_linear(radio.noise_power_dbm)),
             bandwidth_hz=radio.subchannel_bandwidth_hz,
             subframe_s=subframe_s,
-            batch_index=torch.arange(batch, device=device)[:, None],
-            link_index=torch.arange(links, device=device)[None, :],
+            row_offset=rows * radio.num_subchannels,
         )
 
     def numpy(self) -> KernelConstants:
-        return replace(
-            self,
-            batch_index=self.batch_index.cpu().numpy(),
-            link_index=self.link_index.cpu().numpy(),
-        )
+        return replace(self, row_offset=self.row_offset.cpu().numpy())
 
 
 def subframe_step(
@@ -228,18 +223,19 @@ def subframe_step(
     SINR_V2V[i] = P_i·G_i / (σ² + P_I·G_{m→i} + Σ_{j≠i on m} P_j·G_{j→i}); rate = W·log2(1+SINR).
     """
     xp = _xp(actions)
-    bi, li = const.batch_index, const.link_index
     pending = state.remaining_bits > 0
     channel = decode.subchannel[actions]  # [B, L]
     power = decode.power_mw[actions] * pending  # [B, L]
     tx_onehot = decode.onehot[actions] * (power > 0)[..., None]  # [B, L, M]
     power_onehot = tx_onehot * power[..., None]
 
-    own = tables.own_gain[subframe][bi, li, channel]
-    from_v2i = tables.v2i_to_rx_mw[subframe][bi, li, channel]
+    # entry [b, l, channel[b, l]] of a contiguous [B, L, M] array, as one flat gather
+    flat = const.row_offset + channel
+    own = xp.take(tables.own_gain[subframe], flat)
+    from_v2i = xp.take(tables.v2i_to_rx_mw[subframe], flat)
     # received V2V power at each receiver on each sub-channel, then the receiver's own channel
     rx_per_channel = xp.matmul(tables.cross_gain[subframe], power_onehot)  # [B, L, M]
-    from_v2v = rx_per_channel[bi, li, channel]
+    from_v2v = xp.take(rx_per_channel, flat)
     v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
     v2v_bits = xp.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
 

@@ -347,10 +347,11 @@ class DigitalTwin:
         return obs
 
     # ------------------------------------------------------------------ subframes
-    def step_subframe(self, actions) -> link.SubframeOutcome:
+    def step_subframe(self, actions, validated: bool = False) -> link.SubframeOutcome:
         """Transmit one 1 ms subframe with RRA ``actions`` [B, L] (ints in [0, M·P)).
 
-        Arrays are torch tensors, or NumPy arrays with ``backend="numpy"``.
+        Arrays are torch tensors, or NumPy arrays with ``backend="numpy"``. ``validated=True``
+        skips the range check for callers that have already checked every action.
         """
         if not self.radio_enabled:
             raise RuntimeError("this twin was built with radio=False; it has no subframes")
@@ -360,7 +361,8 @@ class DigitalTwin:
                 f"all {self.subframes_per_interval} subframes of the interval have run; "
                 "call finish_interval() first"
             )
-        self._check_rra_actions(actions)
+        if not validated:
+            self._check_rra_actions(actions)
         outcome = link.subframe_step(
             self.tables, t, actions, self.link_state, self._decode, self._const
         )
