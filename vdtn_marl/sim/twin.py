@@ -390,7 +390,12 @@ class DigitalTwin:
             )
 
     def rra_observation(self):
-        """RRA observations [B, L, D] for the next subframe (docs/model.md §4.6)."""
+        """RRA observations [B, L, D] for the next subframe (docs/model.md §4.6).
+
+        The result is a view into the interval's observation buffer: each subframe has its own
+        slot, but calling this again before the next subframe rewrites the same slot in place.
+        Copy it if you keep it.
+        """
         m = self.num_subchannels
         t = min(self.subframe, self.subframes_per_interval - 1)
         obs = self._rra_obs[t]
