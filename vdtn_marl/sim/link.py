@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -133,6 +134,16 @@ def large_scale_gains_db(
     return v2v, v2i
 
 
+@lru_cache(maxsize=32)
+def _link_layout(num_vehicles: int, num_subchannels: int, device: torch.device):
+    """Index constants of the PF link layout: tx, rx, V2I user per sub-channel, off-diagonal."""
+    links = num_vehicles - 1
+    tx = torch.arange(links, device=device)
+    v2i_user = torch.arange(num_subchannels, device=device) % num_vehicles
+    off_diagonal = 1.0 - torch.eye(links, device=device)
+    return tx, tx + 1, v2i_user, off_diagonal
+
+
 def build_interval_tables(
     v2v_gain_db: torch.Tensor,
     v2i_gain_db: torch.Tensor,
@@ -149,10 +160,7 @@ def build_interval_tables(
     """
     b, n = v2i_gain_db.shape
     links, subch, t = n - 1, radio.num_subchannels, num_subframes
-    dev = v2i_gain_db.device
-    tx = torch.arange(links, device=dev)
-    rx = tx + 1
-    v2i_user = torch.arange(subch, device=dev) % n
+    tx, rx, v2i_user, off_diagonal = _link_layout(n, subch, v2i_gain_db.device)
     v2i_power_mw = db_to_linear(radio.v2i_power_dbm)
 
     v2v_lin = db_to_linear(v2v_gain_db)  # [B, N, N]
@@ -161,11 +169,12 @@ def build_interval_tables(
     v2i_to_rx_ls = v2v_lin[:, v2i_user][:, :, rx].transpose(1, 2)  # [B, L, M]
     tx_to_bs_ls = v2i_lin[:, tx]  # [B, L]
     cross_ls = v2v_lin[:, tx][:, :, rx].transpose(1, 2)  # [B, L_rx, L_tx]
-    cross_ls = cross_ls * (1.0 - torch.eye(links, device=dev))
+    cross_ls = cross_ls * off_diagonal
     v2i_signal_ls = v2i_lin[:, v2i_user] * v2i_power_mw  # [B, M]
 
     fading = rayleigh_power_gain((t, b, 3 * links * subch + links * links + subch), generator)
-    cut = np.cumsum([0, links * subch, links * subch, links * subch, links * links])
+    block = links * subch
+    cut = (0, block, 2 * block, 3 * block, 3 * block + links * links)
     own = fading[..., cut[0] : cut[1]].reshape(t, b, links, subch) * own_ls[None, :, :, None]
     v2i_rx = (
         fading[..., cut[1] : cut[2]].reshape(t, b, links, subch) * v2i_to_rx_ls[None] * v2i_power_mw
@@ -250,9 +259,9 @@ def subframe_step(
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
 
 
-def gain_feature(linear: torch.Tensor, reference_mw: float) -> torch.Tensor:
-    """dB of ``linear·reference_mw / σ²``-style ratios, in units of 10 dB, clipped (obs scale)."""
-    db = 10.0 * torch.log10((linear * reference_mw).clamp_min(1e-30))
+def gain_feature(ratio: torch.Tensor) -> torch.Tensor:
+    """A power ratio in dB, in units of ``RRA_OBS_GAIN_SCALE_DB``, clipped (observation scale)."""
+    db = 10.0 * torch.log10(ratio.clamp_min(1e-30))
     return (db / RRA_OBS_GAIN_SCALE_DB).clamp(*RRA_OBS_GAIN_CLIP)
 
 
@@ -264,12 +273,13 @@ def rra_static_observation(
     Blocks: own link SNR at maximum power; interference-to-noise it would cause at the BS at
     maximum power; interference-to-noise it suffers from each V2I user. All in units of 10 dB.
     """
-    p_max = float(db_to_linear(max(radio.v2v_power_levels_dbm)))
-    return torch.cat(
+    snr_at_max_power = float(db_to_linear(max(radio.v2v_power_levels_dbm))) / noise_mw
+    ratios = torch.cat(
         [
-            gain_feature(tables.own_gain, p_max / noise_mw),
-            gain_feature(tables.tx_to_bs_gain, p_max / noise_mw),
-            gain_feature(tables.v2i_to_rx_mw, 1.0 / noise_mw),
+            tables.own_gain * snr_at_max_power,
+            tables.tx_to_bs_gain * snr_at_max_power,
+            tables.v2i_to_rx_mw * (1.0 / noise_mw),
         ],
         dim=-1,
     )
+    return gain_feature(ratios)

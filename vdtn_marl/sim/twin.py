@@ -136,6 +136,8 @@ class DigitalTwin:
         self.interval_ms = pp.control_interval_s * 1000.0
         self.rra_obs_dim = 4 * rp.num_subchannels + 2 + RRA_CONTROL_FEATURES
         self.integrator = IntervalIntegrator(pp, self.device)
+        t = pp.subframes_per_interval  # fraction of the interval left at each subframe, [T]
+        self._time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
         self._decode_torch = link.ActionTables.build(rp, self.device)
         self._const_torch = link.KernelConstants.build(
             rp, pp.subframe_s, self.batch_size, self.num_links, self.device
@@ -337,12 +339,11 @@ class DigitalTwin:
             ],
             dim=-1,
         ).clamp(-RRA_CONTROL_CLIP, RRA_CONTROL_CLIP)
-        time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
         obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
         obs[..., : 3 * m] = csi
         obs[..., 3 * m : 4 * m] = 0.0
         obs[..., 4 * m] = 1.0
-        obs[..., 4 * m + 1] = time_left[:, None, None]
+        obs[..., 4 * m + 1] = self._time_left[:, None, None]
         obs[..., 4 * m + 2 :] = control
         return obs
 
