@@ -298,3 +298,16 @@ def test_bad_rra_actions_raise_with_range():
         twin.step_subframe(torch.tensor([[0, 1]]))
     with pytest.raises(ValueError, match="integers"):
         twin.step_subframe(torch.tensor([[0.5, 1.0, 2.0]]))
+
+
+def test_masked_subframe_advances_only_masked_scenarios():
+    twin = DigitalTwin(batch_size=2, seed=0, trace_source="constant")
+    actions = torch.zeros(2, 3, dtype=torch.long)  # sub-channel 0 at 23 dBm on every link
+    twin.step_subframe(actions)
+    bits_before = twin.link_state.remaining_bits.clone()
+    rate_before = twin._v2i_rate_sum.clone()
+    twin.step_subframe(actions, mask=torch.tensor([True, False]))
+    assert (twin.link_state.remaining_bits[0] < bits_before[0]).all()
+    assert torch.equal(twin.link_state.remaining_bits[1], bits_before[1])
+    assert (twin._v2i_rate_sum[0] > rate_before[0]).all()
+    assert torch.equal(twin._v2i_rate_sum[1], rate_before[1])

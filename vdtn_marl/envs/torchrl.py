@@ -40,7 +40,6 @@ from vdtn_marl.envs.base import rra_observation_space, vehicle_observation_space
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
-from vdtn_marl.sim.link import LinkState
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
@@ -300,30 +299,9 @@ class VDTNTorchRLEnv(EnvBase):
         """Run the interval's T subframes with ``rra_policy``; with ``mask`` [B] only the masked
         scenarios keep the result (the others had already run this interval)."""
         twin = self.twin
-        if mask is not None:
-            saved = LinkState(
-                *(
-                    t.clone()
-                    for t in (
-                        twin.link_state.remaining_bits,
-                        twin.link_state.delay_subframes,
-                        twin.link_state.occupancy,
-                    )
-                )
-            )
-            saved_rate = twin._v2i_rate_sum.clone()
         for _ in range(twin.subframes_per_interval):
             actions = self.rra_policy(twin.rra_observation())
-            twin.step_subframe(torch.as_tensor(actions, device=self.device).long())
-        if mask is not None:
-            keep = ~mask
-            ls = twin.link_state
-            twin.link_state = LinkState(
-                torch.where(keep[:, None], saved.remaining_bits, ls.remaining_bits),
-                torch.where(keep[:, None], saved.delay_subframes, ls.delay_subframes),
-                torch.where(keep[:, None], saved.occupancy, ls.occupancy),
-            )
-            twin._v2i_rate_sum = torch.where(keep[:, None], saved_rate, twin._v2i_rate_sum)
+            twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
 
     # ------------------------------------------------------------------ outputs
     def _vehicle_acts(self) -> torch.Tensor:

@@ -17,6 +17,7 @@ The twin knows nothing of RL APIs. Every random number comes from one seeded
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -348,11 +349,15 @@ class DigitalTwin:
         return obs
 
     # ------------------------------------------------------------------ subframes
-    def step_subframe(self, actions, validated: bool = False) -> link.SubframeOutcome:
+    def step_subframe(
+        self, actions, validated: bool = False, mask: torch.Tensor | None = None
+    ) -> link.SubframeOutcome:
         """Transmit one 1 ms subframe with RRA ``actions`` [B, L] (ints in [0, M·P)).
 
         Arrays are torch tensors, or NumPy arrays with ``backend="numpy"``. ``validated=True``
-        skips the range check for callers that have already checked every action.
+        skips the range check for callers that have already checked every action. With
+        ``mask`` [B] (bool tensor) only the masked scenarios' CAM progress and V2I totals
+        advance: the others keep theirs (used to replay an interval after a partial reset).
         """
         if not self.radio_enabled:
             raise RuntimeError("this twin was built with radio=False; it has no subframes")
@@ -364,10 +369,23 @@ class DigitalTwin:
             )
         if not validated:
             self._check_rra_actions(actions)
-        outcome = link.subframe_step(
-            self.tables, t, actions, self.link_state, self._decode, self._const
-        )
-        self._v2i_rate_sum += outcome.v2i_rate_bps
+        before = self.link_state
+        # the kernel rebinds the state's fields (never writes in place): a shallow copy keeps
+        # `before` intact for the masked merge
+        state = dataclasses.replace(before) if mask is not None else before
+        outcome = link.subframe_step(self.tables, t, actions, state, self._decode, self._const)
+        rate_sum = self._v2i_rate_sum + outcome.v2i_rate_bps
+        if mask is not None:
+            xp = np if self.backend == "numpy" else torch
+            keep = mask.cpu().numpy() if self.backend == "numpy" else mask
+            state = link.LinkState(
+                *(
+                    xp.where(keep[:, None], getattr(state, f.name), getattr(before, f.name))
+                    for f in dataclasses.fields(state)
+                )
+            )
+            rate_sum = xp.where(keep[:, None], rate_sum, self._v2i_rate_sum)
+        self.link_state, self._v2i_rate_sum = state, rate_sum
         self.subframe = t + 1
         return outcome
 
