@@ -1,0 +1,237 @@
+"""The experiment schema: one structured config shared by the CLI and the training code.
+
+Dataclasses (Hydra's ConfigStore registers them, see :mod:`vdtn_marl.cli`) so every key has a
+type and a default; :func:`validate` checks ranges and names the key, the value and what is
+allowed. The training entry points (:mod:`vdtn_marl.algos.api`) take a :class:`RunConfig`.
+
+Groups: ``scenario`` (the model: platoon size, radio, episode, leader traces), ``algo`` (the
+MARL learner), ``control`` (who drives the followers), ``rra`` (who allocates radio resources
+and with which reward), ``experiment`` (budgets).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from typing import Any
+
+from vdtn_marl.sim.params import ConfigError, TwinParams
+
+ALGOS = ("mappo", "ippo")
+CONTROLS = ("learned", "cacc", "oracle")
+RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
+LEARNED_RRA = ("jocc", "drra", "throughput")
+IVOI_ESTIMATORS = ("td", "rollout")
+TASKS = ("control", "control_impaired", "rra")
+COMPLETIONS = ("none", "hold", "kalman", "learned")
+
+
+@dataclass
+class ScenarioConfig:
+    """The simulated world. ``model`` holds any further :class:`TwinParams` override."""
+
+    name: str = "platoon4"
+    num_vehicles: int = 4  # leader + followers
+    num_subchannels: int = 4  # M
+    subchannel_bandwidth_hz: float = 180e3
+    cam_size_bits: int = 14_400
+    episode_intervals: int = 200  # 10 s at Δt = 50 ms
+    traces: str = "synthetic"  # name of a registered leader trace set
+    trace_path: str | None = None  # a user's trace file (NGSIM, highD, time/speed CSV)
+    model: dict[str, Any] = field(default_factory=dict)
+
+    def model_kwargs(self) -> dict[str, Any]:
+        """Flat keyword overrides for :meth:`TwinParams.from_overrides`."""
+        kw = {
+            "num_vehicles": self.num_vehicles,
+            "num_subchannels": self.num_subchannels,
+            "subchannel_bandwidth_hz": self.subchannel_bandwidth_hz,
+            "cam_size_bits": self.cam_size_bits,
+            "episode_intervals": self.episode_intervals,
+        }
+        clash = sorted(set(kw) & set(self.model))
+        if clash:
+            raise ConfigError(
+                f"scenario.model sets {clash[0]!r}, which is a scenario key itself; "
+                f"set scenario.{clash[0]} instead"
+            )
+        return {**kw, **dict(self.model)}
+
+
+@dataclass
+class AlgoConfig:
+    """MAPPO/IPPO hyper-parameters (TorchRL ClipPPOLoss + GAE)."""
+
+    name: str = "mappo"  # mappo: centralised critic (CTDE); ippo: decentralised critics
+    share_params: bool = True  # one network for every agent of a group
+    depth: int = 2  # hidden layers
+    num_cells: int = 64  # units per hidden layer
+    lr: float = 3e-4
+    gamma: float = 0.99  # per step of the trained group's clock
+    lmbda: float = 0.95
+    clip_epsilon: float = 0.2
+    entropy_coef: float = 1e-3
+    critic_coef: float = 1.0
+    max_grad_norm: float = 1.0
+    epochs: int = 4  # PPO epochs per collected batch
+    minibatch_size: int = 1024  # transitions (scenario × step) per gradient step
+    num_envs: int = 64  # B scenarios collected in parallel
+    rollout_steps: int = 20  # steps per scenario per collected batch
+
+    @property
+    def centralised_critic(self) -> bool:
+        return self.name == "mappo"
+
+
+@dataclass
+class ControlConfig:
+    """Who drives the followers: a learned policy, linear CACC, or the oracle (MPC)."""
+
+    name: str = "learned"
+    augmentation: bool = True  # π̃ sees CAM delay/age and its previous command
+    completion: str = "none"  # data completion of late/lost CAMs
+
+
+@dataclass
+class RRAConfig:
+    """Who allocates sub-channel × power for the V2V links, and the reward it learns from."""
+
+    name: str = "jocc"
+    kappa1: float = 0.5  # weight of V2I throughput
+    kappa2: float | None = None  # weight of IVoI; None means 1 − κ1
+    ivoi_estimator: str = "td"
+    throughput_scale: float = 0.004  # reward units per Mbps of summed V2I rate
+    ivoi_scale: float = 20.0  # multiplies ξ before κ2
+    miss_penalty: float = 1.0  # drra: penalty of a CAM that misses its interval
+
+    @property
+    def learned(self) -> bool:
+        return self.name in LEARNED_RRA
+
+    @property
+    def kappa2_value(self) -> float:
+        return 1.0 - self.kappa1 if self.kappa2 is None else self.kappa2
+
+
+@dataclass
+class ExperimentConfig:
+    """Budgets. ``*_iterations`` count PPO collect-and-update iterations."""
+
+    name: str = "default"
+    jocc_iterations: int = 1
+    control_iterations: int = 60
+    rra_iterations: int = 30
+    eval_episodes: int = 16  # scenarios evaluated (one batch)
+    eval_intervals: int = 200  # control intervals per evaluation episode
+    checkpoint_every: int = 10  # iterations between checkpoints (0: only at the end)
+
+
+@dataclass
+class RunConfig:
+    """Root config of every command."""
+
+    scenario: ScenarioConfig = field(default_factory=ScenarioConfig)
+    algo: AlgoConfig = field(default_factory=AlgoConfig)
+    control: ControlConfig = field(default_factory=ControlConfig)
+    rra: RRAConfig = field(default_factory=RRAConfig)
+    experiment: ExperimentConfig = field(default_factory=ExperimentConfig)
+    task: str = "control"  # for `train`: control (π*), control_impaired (π̃) or rra
+    seed: int = 0
+    device: str = "cpu"
+    resume: bool = False
+    checkpoint: str | None = None  # for `eval` (and to start from trained policies)
+    progress: bool = True
+
+    def twin_params(self) -> TwinParams:
+        return TwinParams.from_overrides(**self.scenario.model_kwargs())
+
+
+def _choice(key: str, value: Any, allowed: tuple[str, ...]) -> None:
+    if value not in allowed:
+        raise ConfigError(f"{key}={value!r} is not allowed; choose one of {', '.join(allowed)}")
+
+
+def _positive_int(key: str, value: Any, low: int = 1, high: int = 10**9) -> None:
+    if isinstance(value, bool) or not isinstance(value, int) or not low <= value <= high:
+        raise ConfigError(f"{key}={value!r} must be an integer in [{low}, {high}]")
+
+
+def _real(key: str, value: Any, low: float, high: float, *, low_open: bool = False) -> None:
+    ok = isinstance(value, int | float) and not isinstance(value, bool) and value == value
+    ok = ok and (value > low if low_open else value >= low) and value <= high
+    if not ok:
+        bracket = "(" if low_open else "["
+        raise ConfigError(f"{key}={value!r} is outside the allowed range {bracket}{low}, {high}]")
+
+
+def validate(cfg: RunConfig) -> RunConfig:
+    """Check every key of ``cfg``; raise :class:`ConfigError` naming key, value and range."""
+    s, a, c, r, e = cfg.scenario, cfg.algo, cfg.control, cfg.rra, cfg.experiment
+    _choice("algo.name", a.name, ALGOS)
+    _choice("control.name", c.name, CONTROLS)
+    _choice("control.completion", c.completion, COMPLETIONS)
+    _choice("rra.name", r.name, RRA_METHODS)
+    _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
+    _choice("task", cfg.task, TASKS)
+    _real("rra.kappa1", r.kappa1, 0.0, 1.0)
+    if r.kappa2 is not None:
+        _real("rra.kappa2", r.kappa2, 0.0, 1.0)
+        if abs(r.kappa1 + r.kappa2 - 1.0) > 1e-6:
+            raise ConfigError(
+                f"rra.kappa1={r.kappa1!r} + rra.kappa2={r.kappa2!r} must sum to 1 "
+                "(leave rra.kappa2 unset to derive it as 1 − κ1)"
+            )
+    _real("rra.throughput_scale", r.throughput_scale, 0.0, 1e6)
+    _real("rra.ivoi_scale", r.ivoi_scale, 0.0, 1e6)
+    _real("rra.miss_penalty", r.miss_penalty, 0.0, 1e6)
+    for key in ("depth", "num_cells", "epochs", "minibatch_size", "num_envs", "rollout_steps"):
+        _positive_int(f"algo.{key}", getattr(a, key))
+    _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
+    _real("algo.gamma", a.gamma, 0.0, 1.0)
+    _real("algo.lmbda", a.lmbda, 0.0, 1.0)
+    _real("algo.clip_epsilon", a.clip_epsilon, 0.0, 1.0, low_open=True)
+    _real("algo.entropy_coef", a.entropy_coef, 0.0, 1e3)
+    _real("algo.critic_coef", a.critic_coef, 0.0, 1e3)
+    _real("algo.max_grad_norm", a.max_grad_norm, 0.0, 1e6, low_open=True)
+    for key in ("jocc_iterations", "eval_episodes", "eval_intervals"):
+        _positive_int(f"experiment.{key}", getattr(e, key))
+    for key in ("control_iterations", "rra_iterations", "checkpoint_every"):
+        _positive_int(f"experiment.{key}", getattr(e, key), low=0)
+    _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
+    cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
+    if e.eval_intervals > s.episode_intervals:
+        raise ConfigError(
+            f"experiment.eval_intervals={e.eval_intervals!r} must be <= "
+            f"scenario.episode_intervals={s.episode_intervals!r}"
+        )
+    return cfg
+
+
+def from_dict(data: dict[str, Any]) -> RunConfig:
+    """Build a :class:`RunConfig` from nested plain data; unknown keys raise naming the key."""
+
+    def build(cls, values: dict[str, Any], prefix: str):
+        known = {f.name: f for f in fields(cls)}
+        kwargs = {}
+        for key, value in values.items():
+            if key not in known:
+                raise ConfigError(f"unknown key '{prefix}{key}'; known: {', '.join(sorted(known))}")
+            sub = _NESTED.get((cls, key))
+            kwargs[key] = build(sub, value, f"{prefix}{key}.") if sub else value
+        return cls(**kwargs)
+
+    return build(RunConfig, dict(data), "")
+
+
+def to_dict(cfg: RunConfig) -> dict[str, Any]:
+    """Plain nested data (JSON/YAML-safe) of ``cfg``."""
+    assert is_dataclass(cfg)
+    return asdict(cfg)
+
+
+_NESTED = {
+    (RunConfig, "scenario"): ScenarioConfig,
+    (RunConfig, "algo"): AlgoConfig,
+    (RunConfig, "control"): ControlConfig,
+    (RunConfig, "rra"): RRAConfig,
+    (RunConfig, "experiment"): ExperimentConfig,
+}

@@ -1,0 +1,132 @@
+"""Run outputs: atomic files, the metrics CSV (and TensorBoard when installed), progress bars.
+
+Every file a run writes goes through :func:`atomic_write_bytes` (a temporary file in the same
+directory, then ``os.replace``), so an interrupted run never leaves a half-written summary,
+checkpoint or table.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import math
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+METRICS_FILE = "metrics.csv"
+SUMMARY_FILE = "summary.json"
+CONFIG_FILE = "config.yaml"
+CHECKPOINT_DIR = "checkpoints"
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (temporary file + ``os.replace``)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def atomic_write_text(path: str | Path, text: str) -> Path:
+    return atomic_write_bytes(path, text.encode("utf-8"))
+
+
+def _json_safe(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, Mapping):
+        return {str(k): _json_safe(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_safe(v) for v in value]
+    if hasattr(value, "item") and callable(value.item):  # numpy / torch scalars
+        return _json_safe(value.item())
+    return value
+
+
+def atomic_write_json(path: str | Path, data: Any) -> Path:
+    """JSON with non-finite floats written as ``null`` (strict JSON readers accept it)."""
+    return atomic_write_text(path, json.dumps(_json_safe(data), indent=2, sort_keys=False) + "\n")
+
+
+def read_json(path: str | Path) -> Any:
+    with open(path, encoding="utf-8") as handle:
+        return json.load(handle)
+
+
+class MetricsLog:
+    """Rows of metrics kept in memory and rewritten atomically as ``metrics.csv``.
+
+    Rows may have different keys; the header is the union in first-seen order. TensorBoard
+    scalars are written too when ``tensorboard`` is installed (``tensorboard=True``).
+    """
+
+    def __init__(self, run_dir: str | Path, tensorboard: bool = True, rows: Iterable = ()):
+        self.path = Path(run_dir) / METRICS_FILE
+        self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
+        self._writer = None
+        if tensorboard:
+            try:
+                from torch.utils.tensorboard import SummaryWriter
+
+                self._writer = SummaryWriter(log_dir=str(Path(run_dir) / "tensorboard"))
+            except ImportError:  # tensorboard is optional
+                self._writer = None
+
+    @classmethod
+    def resume(cls, run_dir: str | Path, tensorboard: bool = True) -> MetricsLog:
+        """Re-open a run's log, keeping the rows already written."""
+        path = Path(run_dir) / METRICS_FILE
+        rows = []
+        if path.exists():
+            with open(path, newline="", encoding="utf-8") as handle:
+                rows = list(csv.DictReader(handle))
+        return cls(run_dir, tensorboard=tensorboard, rows=rows)
+
+    def log(self, row: Mapping[str, Any], step: int | None = None) -> None:
+        self.rows.append(dict(row))
+        if self._writer is not None and step is not None:
+            for key, value in row.items():
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    self._writer.add_scalar(key, value, step)
+        self.flush()
+
+    def truncate(self, keep: int) -> None:
+        """Drop rows after the first ``keep`` (a resumed run rewrites what it repeats)."""
+        self.rows = self.rows[:keep]
+        self.flush()
+
+    def flush(self) -> None:
+        header: list[str] = []
+        for row in self.rows:
+            header.extend(k for k in row if k not in header)
+        buffer = io.StringIO()
+        writer = csv.DictWriter(buffer, fieldnames=header)
+        writer.writeheader()
+        writer.writerows(self.rows)
+        atomic_write_text(self.path, buffer.getvalue())
+        if self._writer is not None:
+            self._writer.flush()
+
+    def close(self) -> None:
+        if self._writer is not None:
+            self._writer.close()
+
+
+def progress(total: int, description: str, enabled: bool = True):
+    """A tqdm progress bar on the terminal (disabled when ``enabled`` is False)."""
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=description, disable=not enabled, dynamic_ncols=True, leave=True)
