@@ -1,0 +1,106 @@
+"""VoI estimators against the identity E[Σ_k γ^k ξ_k] = EVoI and the sign of ξ."""
+
+import pytest
+import torch
+
+from vdtn_marl.algos.evaluate import evaluate_system
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.voi import (
+    RolloutIVoIEstimator,
+    RolloutValue,
+    TDIVoIEstimator,
+    expected_voi,
+    make_ivoi_estimator,
+    mean_ci,
+)
+
+INTERVALS = 20
+GAMMA = 0.98
+
+
+@pytest.fixture(scope="module")
+def tracking_setting():
+    """A pure tracking reward (no accel/jerk terms), where perfect-information CACC is a
+    strong reference: late CAMs can only hurt it."""
+    params = TwinParams.from_overrides(
+        episode_intervals=INTERVALS, weight_accel=0.0, weight_jerk=0.0, weight_speed=1.0
+    )
+    cacc = CACCController(params.platoon)
+    value = RolloutValue(cacc, horizon_intervals=INTERVALS, discount=GAMMA)
+    common = dict(episodes=32, intervals=INTERVALS, seed=11, gamma=GAMMA)
+    impaired = evaluate_system(
+        params, cacc, None, perfect=False, ivoi_estimator=TDIVoIEstimator(value, GAMMA), **common
+    )
+    perfect = evaluate_system(params, cacc, None, perfect=True, **common)
+    return params, cacc, impaired, perfect, common
+
+
+def test_td_ivoi_sums_to_evoi_within_its_confidence_interval(tracking_setting):
+    _, _, impaired, perfect, _ = tracking_setting
+    evoi, low, high = expected_voi(impaired.returns, perfect.returns)
+    ivoi_mean, ivoi_low, ivoi_high = mean_ci(impaired.ivoi_sums)
+    assert low < evoi < high
+    assert low <= ivoi_mean <= high
+    assert ivoi_low <= evoi <= ivoi_high
+    # with the exact finite-horizon value the telescoping sum holds scenario by scenario
+    torch.testing.assert_close(
+        impaired.ivoi_sums, impaired.returns - perfect.returns, atol=1e-3, rtol=1e-3
+    )
+
+
+def test_ivoi_is_negative_in_expectation_when_the_reference_is_good(tracking_setting):
+    params, cacc, impaired, perfect, common = tracking_setting
+    evoi, _, evoi_high = expected_voi(impaired.returns, perfect.returns)
+    assert evoi_high < 0.0
+    _, _, ivoi_high = mean_ci(impaired.ivoi_sums)
+    assert ivoi_high < 0.0
+    rollout = evaluate_system(
+        params,
+        cacc,
+        None,
+        perfect=False,
+        ivoi_estimator=RolloutIVoIEstimator(cacc, horizon_intervals=5, discount=GAMMA),
+        **common,
+    )
+    _, _, rollout_high = mean_ci(rollout.ivoi_sums)
+    assert rollout_high < 0.0
+
+
+def test_perfect_observation_has_zero_ivoi():
+    params = TwinParams.from_overrides(episode_intervals=10)
+    cacc = CACCController(params.platoon)
+    value = RolloutValue(cacc, horizon_intervals=10, discount=GAMMA)
+    result = evaluate_system(
+        params, cacc, None, perfect=True, episodes=4, intervals=10, seed=3, gamma=GAMMA,
+        ivoi_estimator=TDIVoIEstimator(value, GAMMA),
+    )  # fmt: skip
+    torch.testing.assert_close(result.ivoi_sums, torch.zeros(4), atol=1e-4, rtol=0)
+
+
+def test_td_estimator_with_a_critic_callable():
+    params = TwinParams.from_overrides(episode_intervals=10)
+    cacc = CACCController(params.platoon)
+
+    def zero_critic(obs):
+        return torch.zeros(obs.shape[:-1])
+
+    result = evaluate_system(
+        params, cacc, None, perfect=False, episodes=4, intervals=10, seed=3, gamma=GAMMA,
+        ivoi_estimator=make_ivoi_estimator("td", value=zero_critic, discount=GAMMA),
+    )  # fmt: skip
+    # v ≡ 0 makes ξ the reward itself, so Σγ^k ξ_k is the discounted return
+    torch.testing.assert_close(result.ivoi_sums, result.returns, atol=1e-5, rtol=1e-5)
+
+
+def test_bad_estimator_arguments_raise():
+    with pytest.raises(ValueError, match="value="):
+        make_ivoi_estimator("td")
+    with pytest.raises(ValueError, match="'rollout', 'td', 'none'"):
+        make_ivoi_estimator("bogus")
+    with pytest.raises(TypeError, match="must be callable"):
+        TDIVoIEstimator(value=3)
+    with pytest.raises(ValueError, match="discount"):
+        TDIVoIEstimator(value=lambda o: o[..., 0], discount=1.5)
+    with pytest.raises(ValueError, match="EVoI pairs"):
+        expected_voi(torch.zeros(3), torch.zeros(4))

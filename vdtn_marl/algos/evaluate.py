@@ -1,0 +1,186 @@
+"""Evaluation of a control policy and an RRA policy on fixed scenarios, straight on the twin.
+
+:func:`evaluate_system` drives one :class:`~vdtn_marl.sim.twin.DigitalTwin` (B = ``episodes``
+scenarios, batched) for ``intervals`` control intervals: each interval the RRA policy picks
+sub-channel × power for every V2V link in every subframe, then the followers decide on what
+they observe (impaired, or perfect) and the twin integrates the platoon. A scenario whose
+platoon collides stops counting from the colliding interval on (its collision is counted).
+
+The same seed gives every method the same leader traces, initial states and channel draws, so
+results of different methods are paired scenario by scenario (EVoI uses that pairing).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import torch
+
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.twin import DigitalTwin
+from vdtn_marl.voi import IVoIEstimator
+
+ControlPolicy = Callable[[torch.Tensor], torch.Tensor]  # observations [B, F, 8] → m/s² [B, F]
+RRAPolicy = Callable[[torch.Tensor], torch.Tensor]  # RRA observations [B, L, D] → long [B, L]
+
+
+@dataclass
+class EvalResult:
+    """Per-scenario returns (for paired statistics) and aggregate metrics of one evaluation.
+
+    ``returns`` [B]: discounted control return, mean over followers. ``ivoi_sums`` [B]:
+    Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given). ``metrics``: plain
+    floats, keys with units (see :data:`METRIC_DOC`). ``traces``: per-interval mean |gap error|
+    (m) and |speed error| (m/s) of scenario 0's followers, [K, F] each, when requested.
+    """
+
+    returns: torch.Tensor
+    metrics: dict[str, float]
+    ivoi_sums: torch.Tensor | None = None
+    traces: dict[str, torch.Tensor] = field(default_factory=dict)
+    cam_latency_ms: torch.Tensor | None = None  # every delivered CAM's latency (for CDFs)
+
+
+METRIC_DOC = {
+    "control_return": "discounted control return per follower (mean over scenarios)",
+    "control_cost": "−(mean control reward) per follower and interval",
+    "gap_error_abs_m": "mean |gap error| (m)",
+    "speed_error_abs_mps": "mean |speed error| (m/s)",
+    "collision_rate": "fraction of scenarios that ended in a collision",
+    "cam_delivery_rate": "fraction of CAMs delivered within their interval",
+    "cam_latency_ms_mean": "mean latency of delivered CAMs (ms)",
+    "cam_latency_ms_p50": "median latency of delivered CAMs (ms)",
+    "cam_latency_ms_p95": "95th percentile latency of delivered CAMs (ms)",
+    "v2i_throughput_mbps_per_link": "mean V2I rate per V2I link (Mbps)",
+}
+
+
+def _bind(policy, twin: DigitalTwin):
+    """Policies that need the twin's true state (the oracle) expose ``bind(twin)``."""
+    return policy.bind(twin) if hasattr(policy, "bind") else policy
+
+
+@torch.no_grad()
+def evaluate_system(
+    params: TwinParams,
+    control: ControlPolicy,
+    rra: RRAPolicy | None = None,
+    *,
+    perfect: bool,
+    episodes: int,
+    intervals: int,
+    seed: int,
+    gamma: float = 0.99,
+    device: str | torch.device = "cpu",
+    trace_source: str | TraceSource | None = None,
+    ivoi_estimator: IVoIEstimator | None = None,
+    record_traces: bool = False,
+) -> EvalResult:
+    """Run ``episodes`` scenarios for ``intervals`` intervals; see the module doc.
+
+    With ``perfect=True`` the radio is off (no CAM impairment, no V2I figures) unless ``rra``
+    is given, in which case the radio runs for its metrics but the followers still observe
+    perfectly. With ``perfect=False`` the radio runs with ``rra`` (default: uniformly random).
+    """
+    if intervals > params.episode_intervals:
+        raise ValueError(
+            f"intervals={intervals} exceeds the model's "
+            f"episode_intervals={params.episode_intervals}"
+        )
+    radio = (not perfect) or rra is not None
+    twin = DigitalTwin(
+        params, batch_size=episodes, device=device, seed=seed, trace_source=trace_source,
+        radio=radio, backend="torch",
+    )  # fmt: skip
+    twin.reset(seed=seed)
+    if radio and rra is None:
+        rra = RandomRRAPolicy(params.radio.num_actions, seed)
+    control = _bind(control, twin)
+    rra = _bind(rra, twin) if rra is not None else None
+    if hasattr(rra, "reset"):
+        rra.reset()
+    b, f = episodes, twin.num_followers
+    dev = twin.device
+    alive = torch.ones(b, dtype=torch.bool, device=dev)
+    returns = torch.zeros(b, f, dtype=torch.float64, device=dev)
+    ivoi_sums = torch.zeros(b, f, dtype=torch.float64, device=dev)
+    reward_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    gap_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    speed_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    counted = torch.zeros((), dtype=torch.float64, device=dev)
+    v2i_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    cams_sent = torch.zeros((), dtype=torch.float64, device=dev)
+    cams_delivered = torch.zeros((), dtype=torch.float64, device=dev)
+    latencies = []
+    gap_trace, speed_trace = [], []
+    t = params.platoon.subframes_per_interval
+    subframe_ms = params.platoon.subframe_s * 1000.0
+    weight = 1.0
+    for k in range(intervals):
+        if k > 0:
+            twin.begin_interval()
+        if radio:
+            for _ in range(t):
+                twin.step_subframe(torch.as_tensor(rra(twin.rra_observation())).long())
+        commands = control(twin.vehicle_observation(perfect=perfect))
+        record = twin.finish_interval(commands, perfect=perfect)
+        live = alive[:, None].double()
+        reward = record.reward.double()
+        returns += weight * live * reward
+        if ivoi_estimator is not None:
+            ivoi_sums += weight * live * ivoi_estimator(twin, record).double()
+        reward_sum += (live * reward).sum()
+        gap_sum += (live * record.gap_error_m.abs().double()).sum()
+        speed_sum += (live * record.speed_error_mps.abs().double()).sum()
+        counted += live.sum() * f
+        if radio:
+            v2i_sum += (alive[:, None].double() * record.v2i_rate_bps.double()).mean(-1).sum()
+            delay = record.cam_delay_subframes
+            delivered = (delay <= t) & alive[:, None]
+            cams_sent += alive.double().sum() * delay.shape[-1]
+            cams_delivered += delivered.double().sum()
+            latencies.append(delay[delivered].double() * subframe_ms)
+        if record_traces:
+            gap_trace.append(record.gap_error_m[0].abs().cpu())
+            speed_trace.append(record.speed_error_mps[0].abs().cpu())
+        alive &= ~record.collided.any(-1)
+        weight *= gamma
+    live_intervals = counted / f
+    metrics = {
+        "control_return": float(returns.mean()),
+        "control_cost": float(-reward_sum / counted),
+        "gap_error_abs_m": float(gap_sum / counted),
+        "speed_error_abs_mps": float(speed_sum / counted),
+        "collision_rate": float((~alive).double().mean()),
+    }
+    latency = torch.cat(latencies) if latencies else torch.zeros(0, dtype=torch.float64)
+    if radio:
+        metrics["cam_delivery_rate"] = float(cams_delivered / cams_sent)
+        if latency.numel():
+            q = torch.quantile(latency, torch.tensor([0.5, 0.95], dtype=torch.float64))
+            metrics["cam_latency_ms_mean"] = float(latency.mean())
+            metrics["cam_latency_ms_p50"] = float(q[0])
+            metrics["cam_latency_ms_p95"] = float(q[1])
+        else:
+            metrics.update(
+                cam_latency_ms_mean=float("nan"),
+                cam_latency_ms_p50=float("nan"),
+                cam_latency_ms_p95=float("nan"),
+            )
+        metrics["v2i_throughput_mbps_per_link"] = float(v2i_sum / live_intervals / 1e6)
+    traces = {}
+    if record_traces:
+        traces = {
+            "gap_error_abs_m": torch.stack(gap_trace),
+            "speed_error_abs_mps": torch.stack(speed_trace),
+        }
+    return EvalResult(
+        returns=returns.mean(-1).float().cpu(),
+        metrics=metrics,
+        ivoi_sums=ivoi_sums.mean(-1).float().cpu() if ivoi_estimator is not None else None,
+        traces=traces,
+        cam_latency_ms=latency.cpu() if radio else None,
+    )

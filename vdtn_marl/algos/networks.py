@@ -1,0 +1,247 @@
+"""Actor and critic networks of one agent group, built from TorchRL parts.
+
+- Actor: observation scaling → :class:`~torchrl.modules.MultiAgentMLP` (decentralised) →
+  a :class:`~torchrl.modules.ProbabilisticActor`. Continuous groups (``vehicle``: acceleration,
+  m/s²) use a TanhNormal bounded to the action range with a state-independent scale; discrete
+  groups (``rra``: sub-channel × power level) use a Categorical over logits.
+- Critic: observation scaling → MultiAgentMLP with ``centralized=True`` for MAPPO (every agent's
+  value sees the whole group's observations: CTDE) or ``False`` for IPPO.
+``share_params`` makes one network serve every agent of the group.
+
+Observations are standardised inside the networks (:class:`ObservationScaler`): first with the
+bounds of the environment's observation spec, then, once :meth:`ObservationScaler.fit_` has
+seen a batch of real observations, with their per-feature mean and standard deviation (as
+TorchRL's ``ObservationNorm.init_stats`` does), so features in m, m/s, m/s², ms and dB enter
+the networks on a common scale and the statistics travel with the weights in checkpoints.
+A feature mask zeroes features a policy must not use (the "no state augmentation" baseline
+drops the CAM delay/age and the previous command).
+
+Policy prior (``prior=...`` on continuous groups): the TanhNormal's location is the prior's
+command (mapped through atanh) plus the MLP's output, whose last layer starts at zero. With the
+linear CACC controller as prior, the untrained policy's mean is CACC and PPO learns a residual
+on top of it; the action distribution, log-probabilities and loss are those of an ordinary
+TanhNormal policy. Without a prior the policy starts from zero commands.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import torch
+from tensordict.nn import AddStateIndependentNormalScale, TensorDictModule
+from torch import nn
+from torchrl.data import Bounded, Composite
+from torchrl.data import Categorical as CategoricalSpec
+from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
+
+#: Vehicle observation features a policy without state augmentation does not see:
+#: CAM delay (ms), CAM age (ms) and its previous command (m/s²) (docs/model.md §2.4).
+AUGMENTATION_FEATURES = (5, 6, 7)
+
+
+class ObservationScaler(nn.Module):
+    """Per-feature affine standardisation; masked features become 0.
+
+    Starts as the map of [low, high] to [−1, 1]; :meth:`fit_` replaces it by
+    (x − mean) / max(std, floor) from observed data, with ``floor`` = 10⁻³ of the feature's
+    range so constant features stay finite.
+    """
+
+    def __init__(self, low: torch.Tensor, high: torch.Tensor, mask: torch.Tensor | None = None):
+        super().__init__()
+        low = low.detach().float()
+        high = high.detach().float()
+        span = (high - low).clamp_min(1e-6)
+        keep = torch.ones_like(low) if mask is None else mask.float()
+        self.register_buffer("center", (high + low) / 2)
+        self.register_buffer("scale", keep * 2.0 / span)
+        self.register_buffer("keep", keep)
+        self.register_buffer("floor", span * 1e-3)
+
+    @torch.no_grad()
+    def fit_(self, observations: torch.Tensor) -> None:
+        """Set the statistics from ``observations`` [..., features] (any batch shape)."""
+        flat = observations.reshape(-1, self.center.numel()).float().to(self.center.device)
+        self.center.copy_(flat.mean(0))
+        std = flat.std(0, unbiased=False) if flat.shape[0] > 1 else torch.zeros_like(self.center)
+        self.scale.copy_(self.keep / torch.maximum(std, self.floor))
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        return (observation - self.center) * self.scale
+
+
+def scalers(module: nn.Module) -> list[ObservationScaler]:
+    """Every :class:`ObservationScaler` inside ``module``."""
+    return [m for m in module.modules() if isinstance(m, ObservationScaler)]
+
+
+def _zero_last_layer(body: MultiAgentMLP) -> None:
+    """Start a MultiAgentMLP at output 0 (so a residual policy starts at its prior)."""
+    keys = sorted(body.params.keys(), key=int)
+    last = body.params[keys[-1]]
+    with torch.no_grad():
+        last["weight"].zero_()
+        last["bias"].zero_()
+
+
+class ResidualLocation(nn.Module):
+    """loc = atanh(prior(observation) / u_max) + MLP(scaled observation), pre-tanh units."""
+
+    def __init__(
+        self,
+        scaler: ObservationScaler,
+        body: nn.Module,
+        prior: Callable[[torch.Tensor], torch.Tensor] | None,
+        low: float,
+        high: float,
+    ):
+        super().__init__()
+        self.scaler = scaler
+        self.body = body
+        self.prior = prior
+        self.register_buffer("center", torch.tensor((high + low) / 2))
+        self.register_buffer("half_range", torch.tensor((high - low) / 2))
+
+    def forward(self, observation: torch.Tensor) -> torch.Tensor:
+        loc = self.body(self.scaler(observation))
+        if self.prior is not None:
+            ratio = (self.prior(observation).unsqueeze(-1) - self.center) / self.half_range
+            loc = loc + torch.atanh(ratio.clamp(-0.995, 0.995))
+        return loc
+
+
+def _scaler(spec: Composite, group: str, drop_features: Sequence[int]) -> ObservationScaler:
+    obs_spec = spec[group, "observation"]
+    low = obs_spec.space.low.reshape(-1, obs_spec.shape[-1])[0]
+    high = obs_spec.space.high.reshape(-1, obs_spec.shape[-1])[0]
+    mask = torch.ones_like(low, dtype=torch.bool)
+    for index in drop_features:
+        if not 0 <= index < mask.numel():
+            raise ValueError(f"drop feature index {index} is outside [0, {mask.numel() - 1}]")
+        mask[index] = False
+    return ObservationScaler(low, high, mask)
+
+
+def group_shape(spec: Composite, group: str) -> tuple[int, int]:
+    """(number of agents, observation size) of ``group`` in a batched observation spec."""
+    shape = spec[group, "observation"].shape
+    return int(shape[-2]), int(shape[-1])
+
+
+def make_actor(
+    observation_spec: Composite,
+    action_spec: Composite,
+    group: str,
+    *,
+    share_params: bool = True,
+    depth: int = 2,
+    num_cells: int = 64,
+    drop_features: Sequence[int] = (),
+    initial_log_scale: float = -1.5,
+    prior: Callable[[torch.Tensor], torch.Tensor] | None = None,
+    device: torch.device | str = "cpu",
+) -> ProbabilisticActor:
+    """Stochastic policy of ``group``; writes ``(group, "action")`` and its log-probability.
+
+    ``prior`` (continuous groups only): a controller observations [..., n, D] → commands
+    [..., n] that the policy's mean starts from (see the module doc). ``initial_log_scale`` is
+    the initial log standard deviation of the pre-tanh Gaussian.
+    """
+    n_agents, n_obs = group_shape(observation_spec, group)
+    action = action_spec[group, "action"]
+    scaler = _scaler(observation_spec, group, drop_features).to(device)
+    if isinstance(action, CategoricalSpec):
+        n_out = int(action.space.n)
+        body = MultiAgentMLP(
+            n_obs,
+            n_out,
+            n_agents,
+            centralized=False,
+            share_params=share_params,
+            device=device,
+            depth=depth,
+            num_cells=num_cells,
+            activation_class=nn.Tanh,
+        )
+        module = TensorDictModule(
+            nn.Sequential(scaler, body),
+            in_keys=[(group, "observation")],
+            out_keys=[(group, "logits")],
+        )
+        return ProbabilisticActor(
+            module,
+            in_keys={"logits": (group, "logits")},
+            out_keys=[(group, "action")],
+            distribution_class=torch.distributions.Categorical,
+            return_log_prob=True,
+            log_prob_key=(group, "action_log_prob"),
+        )
+    if not isinstance(action, Bounded):
+        raise TypeError(f"group {group!r} has an action spec {type(action).__name__}")
+    n_act = int(action.shape[-1])
+    low = action.space.low.reshape(-1)[0].item()
+    high = action.space.high.reshape(-1)[0].item()
+    if prior is not None and n_act != 1:
+        raise ValueError(f"a policy prior needs one action per agent, group {group!r} has {n_act}")
+    body = MultiAgentMLP(
+        n_obs,
+        n_act,
+        n_agents,
+        centralized=False,
+        share_params=share_params,
+        device=device,
+        depth=depth,
+        num_cells=num_cells,
+        activation_class=nn.Tanh,
+    )
+    if prior is not None:
+        _zero_last_layer(body)
+    net = nn.Sequential(
+        ResidualLocation(scaler, body, prior, low, high),
+        AddStateIndependentNormalScale(
+            n_act, scale_mapping="exp", init_value=initial_log_scale, device=device
+        ),
+    )
+    module = TensorDictModule(
+        net, in_keys=[(group, "observation")], out_keys=[(group, "loc"), (group, "scale")]
+    )
+    return ProbabilisticActor(
+        module,
+        in_keys={"loc": (group, "loc"), "scale": (group, "scale")},
+        out_keys=[(group, "action")],
+        distribution_class=TanhNormal,
+        distribution_kwargs={"low": low, "high": high},
+        return_log_prob=True,
+        log_prob_key=(group, "action_log_prob"),
+    )
+
+
+def make_critic(
+    observation_spec: Composite,
+    group: str,
+    *,
+    centralised: bool = True,
+    share_params: bool = True,
+    depth: int = 2,
+    num_cells: int = 64,
+    device: torch.device | str = "cpu",
+) -> TensorDictModule:
+    """State-value network of ``group``; writes ``(group, "state_value")`` [..., n_agents, 1]."""
+    n_agents, n_obs = group_shape(observation_spec, group)
+    scaler = _scaler(observation_spec, group, ()).to(device)
+    body = MultiAgentMLP(
+        n_obs,
+        1,
+        n_agents,
+        centralized=centralised,
+        share_params=share_params,
+        device=device,
+        depth=depth,
+        num_cells=num_cells,
+        activation_class=nn.Tanh,
+    )
+    return TensorDictModule(
+        nn.Sequential(scaler, body),
+        in_keys=[(group, "observation")],
+        out_keys=[(group, "state_value")],
+    )

@@ -1,0 +1,260 @@
+"""MAPPO / IPPO for one agent group of a batched TorchRL environment.
+
+Built from TorchRL parts: :func:`~vdtn_marl.algos.networks.make_actor` /
+:func:`~vdtn_marl.algos.networks.make_critic` (MultiAgentMLP, ProbabilisticActor),
+:class:`~torchrl.objectives.ClipPPOLoss` and its GAE value estimator. Rollouts come from the
+environment's own ``rollout`` (the batched face is already vectorised over B scenarios, so a
+collector would add nothing but a copy).
+
+Reproducibility: iteration ``k`` collects from freshly reset scenarios seeded with
+``seed_for(k)``; action sampling and minibatch shuffles use the global torch RNG, whose state
+goes into :meth:`PPOTrainer.state_dict`. A run resumed from a checkpoint therefore continues
+bit for bit on the same device.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import torch
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import InteractionType, set_interaction_type
+from torchrl.envs import EnvBase
+from torchrl.objectives import ClipPPOLoss, ValueEstimators
+
+from vdtn_marl.algos.networks import make_actor, make_critic, scalers
+from vdtn_marl.config import AlgoConfig
+
+#: Iteration seeds are spread so that no two iterations (or two runs with nearby seeds) share
+#: scenarios: seed_for(k) = seed · SEED_STRIDE + k.
+SEED_STRIDE = 1_000_003
+
+
+@dataclass
+class IterationStats:
+    """What one collect-and-update iteration did (rewards per agent per step of its clock)."""
+
+    iteration: int
+    frames: int  # scenario-steps collected
+    reward_mean: float
+    episodes_done: int
+    loss_objective: float
+    loss_critic: float
+    loss_entropy: float
+    seconds: float
+
+    def row(self, prefix: str) -> dict:
+        return {f"{prefix}/{k}": v for k, v in self.__dict__.items()}
+
+
+class PPOTrainer:
+    """Clipped PPO with GAE for ``group`` of ``env`` (MAPPO with a centralised critic or IPPO).
+
+    Args:
+        env: a batched TorchRL environment with the group's nested keys (e.g.
+            :class:`~vdtn_marl.envs.torchrl.VDTNTorchRLEnv`, or a ``PettingZooWrapper``).
+        group: ``"vehicle"`` or ``"rra"``.
+        algo: hyper-parameters (:class:`~vdtn_marl.config.AlgoConfig`); ``algo.name == "mappo"``
+            gives the critic the whole group's observations.
+        seed: seeds the scenarios of every iteration (see the module doc).
+        drop_features: observation features the actor must not see (the critic sees all).
+        prior: controller the continuous policy starts from (see
+            :mod:`~vdtn_marl.algos.networks`), e.g. the linear CACC controller.
+    """
+
+    def __init__(
+        self,
+        env: EnvBase,
+        group: str,
+        algo: AlgoConfig,
+        seed: int = 0,
+        drop_features: Sequence[int] = (),
+        prior=None,
+    ):
+        self.env = env
+        self.group = group
+        self.algo = algo
+        self.seed = int(seed)
+        self.device = env.device
+        obs_spec = env.observation_spec
+        self.actor = make_actor(
+            obs_spec,
+            env.full_action_spec,
+            group,
+            share_params=algo.share_params,
+            depth=algo.depth,
+            num_cells=algo.num_cells,
+            drop_features=drop_features,
+            prior=prior,
+            device=self.device,
+        )
+        self.critic = make_critic(
+            obs_spec,
+            group,
+            centralised=algo.centralised_critic,
+            share_params=algo.share_params,
+            depth=algo.depth,
+            num_cells=algo.num_cells,
+            device=self.device,
+        )
+        self.loss = ClipPPOLoss(
+            actor_network=self.actor,
+            critic_network=self.critic,
+            clip_epsilon=algo.clip_epsilon,
+            entropy_coeff=algo.entropy_coef,
+            critic_coeff=algo.critic_coef,
+            normalize_advantage=True,
+            normalize_advantage_exclude_dims=(-2,),  # the agent dimension
+        )
+        self.loss.set_keys(
+            reward=(group, "reward"),
+            action=(group, "action"),
+            sample_log_prob=(group, "action_log_prob"),
+            value=(group, "state_value"),
+            done=(group, "done"),
+            terminated=(group, "terminated"),
+        )
+        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=algo.gamma, lmbda=algo.lmbda)
+        self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo.lr)
+        self.iteration = 0
+        self.scaling_fitted = False
+
+    # ------------------------------------------------------------------ data
+    def seed_for(self, iteration: int) -> int:
+        return self.seed * SEED_STRIDE + iteration
+
+    def collect(self, iteration: int | None = None) -> TensorDictBase:
+        """Roll out ``algo.rollout_steps`` steps of every scenario with the stochastic actor."""
+        k = self.iteration if iteration is None else iteration
+        self.env.set_seed(self.seed_for(k))
+        with torch.no_grad(), set_interaction_type(InteractionType.RANDOM):
+            start = self.env.reset()
+            return self.env.rollout(
+                self.algo.rollout_steps,
+                policy=self.actor,
+                tensordict=start,
+                auto_reset=False,
+                break_when_any_done=False,
+            )
+
+    def fit_observation_scaling(self) -> None:
+        """Standardise observations with statistics of one rollout of the initial policy
+        (scenarios seeded apart from the training iterations)."""
+        data = self.collect(iteration=SEED_STRIDE - 1)
+        observations = data.get((self.group, "observation"))
+        for scaler in scalers(self.actor) + scalers(self.critic):
+            scaler.fit_(observations)
+        self.scaling_fitted = True
+
+    # ------------------------------------------------------------------ update
+    def update(self, data: TensorDictBase) -> dict[str, float]:
+        """GAE, then ``algo.epochs`` passes of shuffled minibatches of the clipped loss."""
+        with torch.no_grad():
+            self.loss.value_estimator(
+                data,
+                params=self.loss.critic_network_params,
+                target_params=self.loss.target_critic_network_params,
+            )
+        flat = data.reshape(-1)
+        n = flat.shape[0]
+        size = min(self.algo.minibatch_size, n)
+        sums = {"loss_objective": 0.0, "loss_critic": 0.0, "loss_entropy": 0.0}
+        steps = 0
+        for _ in range(self.algo.epochs):
+            order = torch.randperm(n, device=self.device)
+            for start in range(0, n - size + 1, size):
+                batch = flat[order[start : start + size]]
+                losses = self.loss(batch)
+                total = losses["loss_objective"] + losses["loss_critic"] + losses["loss_entropy"]
+                self.optimizer.zero_grad(set_to_none=True)
+                total.backward()
+                torch.nn.utils.clip_grad_norm_(self.loss.parameters(), self.algo.max_grad_norm)
+                self.optimizer.step()
+                for key in sums:
+                    sums[key] += float(losses[key].detach())
+                steps += 1
+        return {key: value / max(steps, 1) for key, value in sums.items()}
+
+    def train_iteration(self) -> IterationStats:
+        """Collect one batch and update on it; returns the iteration's statistics."""
+        if not self.scaling_fitted:
+            self.fit_observation_scaling()
+        began = time.perf_counter()
+        data = self.collect()
+        reward = data.get(("next", self.group, "reward"))
+        done = data.get(("next", "done"))
+        losses = self.update(data)
+        stats = IterationStats(
+            iteration=self.iteration,
+            frames=int(data.numel()),
+            reward_mean=float(reward.mean()),
+            episodes_done=int(done.sum()),
+            seconds=time.perf_counter() - began,
+            **losses,
+        )
+        self.iteration += 1
+        return stats
+
+    # ------------------------------------------------------------------ state
+    def state_dict(self) -> dict:
+        return {
+            "actor": self.actor.state_dict(),
+            "critic": self.critic.state_dict(),
+            "optimizer": self.optimizer.state_dict(),
+            "iteration": self.iteration,
+            "scaling_fitted": self.scaling_fitted,
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self.actor.load_state_dict(state["actor"])
+        self.critic.load_state_dict(state["critic"])
+        self.optimizer.load_state_dict(state["optimizer"])
+        self.iteration = int(state["iteration"])
+        self.scaling_fitted = bool(state["scaling_fitted"])
+
+
+class ActorPolicy:
+    """A trained actor as a plain callable: observations [B, n, D] → actions [B, n].
+
+    Deterministic by default (the mode of the action distribution); continuous actions come
+    back as float m/s², discrete ones as long indices. This is how a learned policy is handed
+    to an environment as ``rra_policy`` or ``control_module``.
+    """
+
+    def __init__(self, actor, group: str, deterministic: bool = True):
+        self.actor = actor
+        self.group = group
+        self.interaction = (
+            InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM
+        )
+
+    @torch.no_grad()
+    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        observation = torch.as_tensor(observation, dtype=torch.float32)
+        td = TensorDict(
+            {(self.group, "observation"): observation},
+            batch_size=observation.shape[:-2],
+            device=observation.device,
+        )
+        with set_interaction_type(self.interaction):
+            action = self.actor(td).get((self.group, "action"))
+        return action.squeeze(-1) if action.dim() == observation.dim() else action
+
+
+class CriticValue:
+    """A group critic as a value function: observations [B, n, D] → values [B, n]."""
+
+    def __init__(self, critic, group: str):
+        self.critic = critic
+        self.group = group
+
+    @torch.no_grad()
+    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        td = TensorDict(
+            {(self.group, "observation"): observation.float()},
+            batch_size=observation.shape[:-2],
+            device=observation.device,
+        )
+        return self.critic(td).get((self.group, "state_value")).squeeze(-1)
