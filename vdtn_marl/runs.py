@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 METRICS_FILE = "metrics.csv"
+EVALUATION_FILE = "evaluation.csv"
 SUMMARY_FILE = "summary.json"
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_DIR = "checkpoints"
@@ -73,8 +74,14 @@ class MetricsLog:
     scalars are written too when ``tensorboard`` is installed (``tensorboard=True``).
     """
 
-    def __init__(self, run_dir: str | Path, tensorboard: bool = True, rows: Iterable = ()):
-        self.path = Path(run_dir) / METRICS_FILE
+    def __init__(
+        self,
+        run_dir: str | Path,
+        tensorboard: bool = True,
+        rows: Iterable = (),
+        filename: str = METRICS_FILE,
+    ):
+        self.path = Path(run_dir) / filename
         self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
         self._writer = None
         if tensorboard:
@@ -86,14 +93,16 @@ class MetricsLog:
                 self._writer = None
 
     @classmethod
-    def resume(cls, run_dir: str | Path, tensorboard: bool = True) -> MetricsLog:
+    def resume(
+        cls, run_dir: str | Path, tensorboard: bool = True, filename: str = METRICS_FILE
+    ) -> MetricsLog:
         """Re-open a run's log, keeping the rows already written."""
-        path = Path(run_dir) / METRICS_FILE
+        path = Path(run_dir) / filename
         rows = []
         if path.exists():
             with open(path, newline="", encoding="utf-8") as handle:
                 rows = list(csv.DictReader(handle))
-        return cls(run_dir, tensorboard=tensorboard, rows=rows)
+        return cls(run_dir, tensorboard=tensorboard, rows=rows, filename=filename)
 
     def log(self, row: Mapping[str, Any], step: int | None = None) -> None:
         self.rows.append(dict(row))

@@ -62,6 +62,7 @@ class PPOTrainer:
         drop_features: observation features the actor must not see (the critic sees all).
         prior: controller the continuous policy starts from (see
             :mod:`~vdtn_marl.algos.networks`), e.g. the linear CACC controller.
+        rollout_steps: steps per scenario per batch (default ``algo.rollout_steps``).
     """
 
     def __init__(
@@ -72,11 +73,13 @@ class PPOTrainer:
         seed: int = 0,
         drop_features: Sequence[int] = (),
         prior=None,
+        rollout_steps: int | None = None,
     ):
         self.env = env
         self.group = group
         self.algo = algo
         self.seed = int(seed)
+        self.rollout_steps = int(rollout_steps or algo.rollout_steps)
         self.device = env.device
         obs_spec = env.observation_spec
         self.actor = make_actor(
@@ -126,13 +129,13 @@ class PPOTrainer:
         return self.seed * SEED_STRIDE + iteration
 
     def collect(self, iteration: int | None = None) -> TensorDictBase:
-        """Roll out ``algo.rollout_steps`` steps of every scenario with the stochastic actor."""
+        """Roll out ``rollout_steps`` steps of every scenario with the stochastic actor."""
         k = self.iteration if iteration is None else iteration
         self.env.set_seed(self.seed_for(k))
         with torch.no_grad(), set_interaction_type(InteractionType.RANDOM):
             start = self.env.reset()
             return self.env.rollout(
-                self.algo.rollout_steps,
+                self.rollout_steps,
                 policy=self.actor,
                 tensordict=start,
                 auto_reset=False,

@@ -1,0 +1,421 @@
+"""Joint optimisation of communication and control (JOCC), and its single-stage variants.
+
+One JOCC iteration runs four stages:
+
+1. ``control_perfect``: train π* (MAPPO, group ``vehicle``) on perfect observations;
+2. ``control_impaired``: train π̃ on impaired observations (CAM delay/age and the previous
+   command in its state) under the current RRA policy: uniformly random in iteration 0, the
+   learned RRA policy afterwards (or the configured RRA baseline);
+3. ``rra``: hand the VoI estimator (``td`` with π*'s critic as v*, or ``rollout``) to the RRA
+   environment, whose control module is π̃, and train the RRA agents (MAPPO, group ``rra``)
+   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``throughput``);
+4. ``evaluate``: π̃ with the RRA policy on impaired observations and π* on perfect ones, over
+   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, V2I
+   throughput per link, EVoI with its 95% CI (and the IVoI sum for comparison).
+
+``vdtn-marl train`` runs a subset of the stages (see :data:`TASK_STAGES`). Baselines slot in
+by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
+replaces the learned RRA policy (their training stages are skipped).
+
+Checkpoints (``checkpoints/last.pt``) are written every ``experiment.checkpoint_every`` PPO
+iterations and at the end of every stage; ``resume=true`` continues from the last one and,
+on the same device, reproduces an uninterrupted run bit for bit.
+
+Run ``python -m vdtn_marl.algos.jocc`` for one JOCC iteration with the default small budgets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from vdtn_marl import __version__
+from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
+from vdtn_marl.algos.checkpoint import (
+    CheckpointError,
+    load_checkpoint,
+    rng_state,
+    save_checkpoint,
+    set_rng_state,
+)
+from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
+from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
+from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
+from vdtn_marl.config import RunConfig, to_dict, validate
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.runs import (
+    CHECKPOINT_DIR,
+    EVALUATION_FILE,
+    SUMMARY_FILE,
+    MetricsLog,
+    atomic_write_json,
+    progress,
+)
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.params import ConfigError
+from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
+
+STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
+TASK_STAGES = {
+    "jocc": STAGES,
+    "control": ("control_perfect", "evaluate"),
+    "control_impaired": ("control_perfect", "control_impaired", "evaluate"),
+    "rra": ("control_perfect", "rra", "evaluate"),
+}
+#: Evaluation scenarios are seeded apart from every training scenario.
+EVAL_SEED_OFFSET = 1_000_000_000
+LAST_CHECKPOINT = "last.pt"
+
+
+class SwitchablePolicy:
+    """A policy slot an environment holds while the policy behind it changes (JOCC hands the
+    learned RRA policy to the control environment after iteration 0)."""
+
+    def __init__(self, policy):
+        self.policy = policy
+
+    def __call__(self, observation):
+        return self.policy(observation)
+
+    def seed(self, seed: int | None) -> None:
+        if hasattr(self.policy, "seed"):
+            self.policy.seed(seed)
+
+
+def trace_source(cfg: RunConfig, part: str) -> str | TraceSource:
+    """The scenario's leader traces; a user's file is split into train/eval parts."""
+    scenario = cfg.scenario
+    if scenario.trace_path is None:
+        return scenario.traces
+    from vdtn_marl.data.profiles import load_trace_source
+
+    return load_trace_source(scenario.traces, scenario.trace_path, part=part)
+
+
+class JointOptimisation:
+    """The JOCC loop (see the module doc). ``task`` picks the stages (:data:`TASK_STAGES`)."""
+
+    def __init__(self, cfg: RunConfig, run_dir: str | Path, task: str = "jocc"):
+        if task not in TASK_STAGES:
+            raise ConfigError(f"task={task!r} is not one of {', '.join(TASK_STAGES)}")
+        self.cfg = validate(cfg)
+        self.task = task
+        self.stages = TASK_STAGES[task]
+        self.run_dir = Path(run_dir)
+        self.params = cfg.twin_params()
+        self.device = torch.device(cfg.device)
+        torch.manual_seed(cfg.seed)
+        algo, control, rra = cfg.algo, cfg.control, cfg.rra
+        self.control_learned = control.name == "learned"
+        self.rra_learned = rra.learned
+        self.gamma = algo.gamma
+        train_traces = trace_source(cfg, "train")
+        self.eval_traces = trace_source(cfg, "eval")
+        env_kw: dict[str, Any] = dict(
+            batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
+            trace_source=train_traces, **cfg.scenario.model_kwargs(),
+        )  # fmt: skip
+        cacc = CACCController(self.params.platoon)
+
+        self.pi_star = PPOTrainer(
+            VDTNTorchRLEnv("control", **env_kw), "vehicle", algo, seed=cfg.seed * 8, prior=cacc
+        )
+        first_rra = "random" if self.rra_learned else rra.name
+        self.rra_slot = SwitchablePolicy(make_rra_baseline(first_rra, self.params, cfg.seed))
+        drop = () if control.augmentation else AUGMENTATION_FEATURES
+        self.pi_tilde = PPOTrainer(
+            VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **env_kw),
+            "vehicle",
+            algo,
+            seed=cfg.seed * 8 + 1,
+            drop_features=drop,
+            prior=cacc,
+        )
+        v_star = CriticValue(self.pi_star.critic, "vehicle")
+        if rra.ivoi_estimator == "td":
+            self.estimator = TDIVoIEstimator(v_star, self.gamma)
+        else:
+            self.estimator = RolloutIVoIEstimator(
+                ActorPolicy(self.pi_star.actor, "vehicle"),
+                horizon_intervals=10,
+                discount=self.gamma,
+                terminal_value=v_star,
+            )
+        self.rra = None
+        if self.rra_learned:
+            rra_env = VDTNTorchRLEnv(
+                "rra",
+                control_module=SwitchablePolicy(self._control_policy()),
+                reward=rra.name,
+                kappa1=rra.kappa1,
+                kappa2=rra.kappa2_value,
+                ivoi_estimator=self.estimator,
+                throughput_scale=rra.throughput_scale,
+                ivoi_scale=rra.ivoi_scale,
+                miss_penalty=rra.miss_penalty,
+                **env_kw,
+            )
+            if control.name == "oracle":
+                rra_env.control_module.policy = make_control_baseline("oracle", rra_env.twin)
+            self.rra = PPOTrainer(
+                rra_env, "rra", algo, seed=cfg.seed * 8 + 2, rollout_steps=algo.rra_rollout_steps
+            )
+        self.position = {"iteration": 0, "stage": 0, "stage_start": None}
+        self.train_log = MetricsLog(self.run_dir, tensorboard=True)
+        self.eval_log = MetricsLog(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
+        self.last_evaluation: dict[str, Any] | None = None
+
+    # ------------------------------------------------------------------ policies
+    def _control_policy(self):
+        """The acting control policy (π̃ or a control baseline) as obs → commands."""
+        if self.control_learned:
+            return ActorPolicy(self.pi_tilde.actor, "vehicle")
+        return make_control_baseline(self.cfg.control.name, self.params)
+
+    def _rra_policy(self):
+        """The current RRA policy: the learned one once trained (uniformly random before)."""
+        if self.rra_learned:
+            if self.rra.iteration == 0:
+                return make_rra_baseline("random", self.params, self.cfg.seed)
+            return ActorPolicy(self.rra.actor, "rra")
+        return make_rra_baseline(self.cfg.rra.name, self.params, self.cfg.seed)
+
+    def trainers(self) -> dict[str, PPOTrainer]:
+        out = {"pi_star": self.pi_star, "pi_tilde": self.pi_tilde}
+        if self.rra is not None:
+            out["rra"] = self.rra
+        return out
+
+    # ------------------------------------------------------------------ checkpoints
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.run_dir / CHECKPOINT_DIR / LAST_CHECKPOINT
+
+    def save(self, path: Path | None = None) -> Path:
+        return save_checkpoint(
+            path or self.checkpoint_path,
+            {
+                "config": to_dict(self.cfg),
+                "task": self.task,
+                "position": dict(self.position),
+                "trainers": {name: t.state_dict() for name, t in self.trainers().items()},
+                "rng": rng_state(),
+                "log_rows": {"train": len(self.train_log.rows), "eval": len(self.eval_log.rows)},
+                "version": __version__,
+            },
+        )
+
+    def load_policies(self, payload: dict[str, Any]) -> None:
+        """Load every trainer state a checkpoint holds (policies, critics, optimisers)."""
+        for name, trainer in self.trainers().items():
+            state = payload["trainers"].get(name)
+            if state is not None:
+                try:
+                    trainer.load_state_dict(state)
+                except (RuntimeError, KeyError) as err:
+                    raise CheckpointError(
+                        f"checkpoint trainer {name!r} does not fit this config ({err})"
+                    ) from err
+
+    def resume(self) -> bool:
+        """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
+        if not self.checkpoint_path.exists():
+            return False
+        payload = load_checkpoint(self.checkpoint_path, to_dict(self.cfg))
+        if payload.get("task") != self.task:
+            raise CheckpointError(
+                f"checkpoint {str(self.checkpoint_path)!r} is from task={payload.get('task')!r}, "
+                f"not task={self.task!r}"
+            )
+        self.load_policies(payload)
+        self.position = dict(payload["position"])
+        set_rng_state(payload["rng"])
+        self.train_log = MetricsLog.resume(self.run_dir)
+        self.train_log.truncate(payload["log_rows"]["train"])
+        self.eval_log = MetricsLog.resume(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
+        self.eval_log.truncate(payload["log_rows"]["eval"])
+        return True
+
+    # ------------------------------------------------------------------ stages
+    def _stage_budget(self, stage: str) -> tuple[PPOTrainer | None, int]:
+        e = self.cfg.experiment
+        if stage == "control_perfect":
+            return self.pi_star, e.control_iterations
+        if stage == "control_impaired":
+            return (self.pi_tilde, e.control_iterations) if self.control_learned else (None, 0)
+        if stage == "rra":
+            return (self.rra, e.rra_iterations) if self.rra_learned else (None, 0)
+        return None, 0
+
+    def total_steps(self) -> int:
+        per_iteration = sum(self._stage_budget(s)[1] for s in self.stages) + (
+            1 if "evaluate" in self.stages else 0
+        )
+        return per_iteration * self.cfg.experiment.jocc_iterations
+
+    def _train_stage(self, stage: str, bar) -> None:
+        trainer, budget = self._stage_budget(stage)
+        if trainer is None or budget == 0:
+            return
+        if stage == "control_impaired":
+            self.rra_slot.policy = self._rra_policy()
+        if self.position["stage_start"] is None:
+            self.position["stage_start"] = trainer.iteration
+        end = self.position["stage_start"] + budget
+        every = self.cfg.experiment.checkpoint_every
+        while trainer.iteration < end:
+            stats = trainer.train_iteration()
+            row = {"jocc_iteration": self.position["iteration"], "stage": stage}
+            row.update(stats.__dict__)
+            self.train_log.log(row, step=None)
+            bar.update(1)
+            bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
+            if every and trainer.iteration < end and trainer.iteration % every == 0:
+                self.save()
+
+    def evaluate(self) -> dict[str, Any]:
+        """The ``evaluate`` stage: metrics of the acting system, EVoI against π*."""
+        cfg = self.cfg
+        common = dict(
+            episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
+            seed=EVAL_SEED_OFFSET + cfg.seed, gamma=self.gamma, device=self.device,
+            trace_source=self.eval_traces,
+        )  # fmt: skip
+        began = time.perf_counter()
+        optimal = evaluate_system(
+            self.params, ActorPolicy(self.pi_star.actor, "vehicle"), None, perfect=True, **common
+        )
+        row: dict[str, Any] = {"jocc_iteration": self.position["iteration"]}
+        if self.stages == TASK_STAGES["control"]:
+            cacc = evaluate_system(
+                self.params, CACCController(self.params.platoon), None, perfect=True, **common
+            )
+            row.update(optimal.metrics)
+            row["cacc_control_cost"] = cacc.metrics["control_cost"]
+            self._last_results = (optimal, None)
+        else:
+            acting: EvalResult = evaluate_system(
+                self.params,
+                self._control_policy(),
+                self._rra_policy(),
+                perfect=False,
+                ivoi_estimator=self.estimator,
+                record_traces=True,
+                **common,
+            )
+            evoi, low, high = expected_voi(acting.returns, optimal.returns)
+            ivoi, ivoi_low, ivoi_high = mean_ci(acting.ivoi_sums)
+            row.update(acting.metrics)
+            row.update(
+                optimal_control_cost=optimal.metrics["control_cost"],
+                evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
+                ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
+            )  # fmt: skip
+            self._last_results = (optimal, acting)
+        row["seconds"] = time.perf_counter() - began
+        self.eval_log.log(row)
+        self.last_evaluation = row
+        return row
+
+    # ------------------------------------------------------------------ loop
+    def run(self) -> dict[str, Any]:
+        """Run (or continue) every iteration and stage; write and return the summary."""
+        cfg = self.cfg
+        resumed = cfg.resume and self.resume()
+        began = time.perf_counter()
+        done_steps = 0
+        if resumed:
+            done_steps = self._steps_before(self.position)
+        with progress(self.total_steps(), f"{self.task} seed={cfg.seed}", cfg.progress) as bar:
+            bar.update(done_steps)
+            while self.position["iteration"] < cfg.experiment.jocc_iterations:
+                stage = self.stages[self.position["stage"]]
+                if stage == "evaluate":
+                    self.evaluate()
+                    bar.update(1)
+                else:
+                    self._train_stage(stage, bar)
+                self._advance()
+                self.save()
+        summary = self.summary(time.perf_counter() - began, resumed)
+        atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
+        self.train_log.close()
+        return summary
+
+    def _advance(self) -> None:
+        self.position["stage"] += 1
+        self.position["stage_start"] = None
+        if self.position["stage"] == len(self.stages):
+            self.position["stage"] = 0
+            self.position["iteration"] += 1
+
+    def _steps_before(self, position: dict[str, Any]) -> int:
+        per_stage = [
+            self._stage_budget(s)[1] if s != "evaluate" else 1 for s in self.stages
+        ]  # fmt: skip
+        steps = position["iteration"] * sum(per_stage) + sum(per_stage[: position["stage"]])
+        if position["stage_start"] is not None:
+            trainer, _ = self._stage_budget(self.stages[position["stage"]])
+            steps += trainer.iteration - position["stage_start"]
+        return steps
+
+    def summary(self, seconds: float, resumed: bool) -> dict[str, Any]:
+        evaluation = dict(self.last_evaluation or {})
+        if not evaluation and self.eval_log.rows:
+            evaluation = dict(self.eval_log.rows[-1])
+        return {
+            "vdtn_marl_version": __version__,
+            "task": self.task,
+            "seed": self.cfg.seed,
+            "kappa1": self.cfg.rra.kappa1,
+            "kappa2": self.cfg.rra.kappa2_value,
+            "rra": self.cfg.rra.name,
+            "control": self.cfg.control.name,
+            "scenario": self.cfg.scenario.name,
+            "iterations": self.position["iteration"],
+            "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
+            "seconds": seconds,
+            "resumed": resumed,
+            **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
+            "config": to_dict(self.cfg),
+        }
+
+
+def format_table(row: dict[str, Any]) -> str:
+    """A plain two-column table of an evaluation row (units are in the metric names)."""
+    width = max(len(k) for k in row)
+    lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
+    for key, value in row.items():
+        if key == "config" or isinstance(value, dict):
+            continue
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        lines.append(f"{key:<{width}}  {text}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m vdtn_marl.algos.jocc",
+        description="One JOCC iteration with the default small budgets; prints the metrics.",
+    )
+    parser.add_argument("--run-dir", default="runs/jocc", help="output directory")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--kappa1", type=float, default=0.5)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument("--resume", action="store_true")
+    args = parser.parse_args(argv)
+    cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
+    cfg.rra.kappa1 = args.kappa1
+    summary = JointOptimisation(cfg, args.run_dir).run()
+    print(format_table(summary))
+    print(f"outputs: {Path(args.run_dir).resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
