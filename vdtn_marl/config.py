@@ -75,7 +75,8 @@ class AlgoConfig:
     epochs: int = 4  # PPO epochs per collected batch
     minibatch_size: int = 1024  # transitions (scenario × step) per gradient step
     num_envs: int = 64  # B scenarios collected in parallel
-    rollout_steps: int = 20  # steps per scenario per collected batch
+    rollout_steps: int = 50  # control intervals per scenario per collected batch (vehicles)
+    rra_rollout_steps: int = 100  # subframes per scenario per collected batch (RRA agents)
 
     @property
     def centralised_critic(self) -> bool:
@@ -183,7 +184,15 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("rra.throughput_scale", r.throughput_scale, 0.0, 1e6)
     _real("rra.ivoi_scale", r.ivoi_scale, 0.0, 1e6)
     _real("rra.miss_penalty", r.miss_penalty, 0.0, 1e6)
-    for key in ("depth", "num_cells", "epochs", "minibatch_size", "num_envs", "rollout_steps"):
+    for key in (
+        "depth",
+        "num_cells",
+        "epochs",
+        "minibatch_size",
+        "num_envs",
+        "rollout_steps",
+        "rra_rollout_steps",
+    ):
         _positive_int(f"algo.{key}", getattr(a, key))
     _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
     _real("algo.gamma", a.gamma, 0.0, 1.0)
@@ -235,3 +244,90 @@ _NESTED = {
     (RunConfig, "rra"): RRAConfig,
     (RunConfig, "experiment"): ExperimentConfig,
 }
+
+
+def validate_device(device: str) -> str:
+    """Check that torch can use ``device`` here; raise :class:`ConfigError` naming ``device``."""
+    if not isinstance(device, str) or not device:
+        raise ConfigError(f"device={device!r} is not allowed; use cpu, cuda or cuda:N")
+    if device == "cpu":
+        return device
+    import torch
+
+    try:
+        parsed = torch.device(device)
+    except (RuntimeError, ValueError):
+        raise ConfigError(
+            f"device={device!r} is not a torch device; use cpu, cuda or cuda:N"
+        ) from None
+    if parsed.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(
+                f"device={device!r} is not available: torch.cuda.is_available() is False on "
+                "this machine (a CPU-only torch build, or no GPU); allowed: cpu"
+            )
+        count = torch.cuda.device_count()
+        if parsed.index is not None and parsed.index >= count:
+            raise ConfigError(
+                f"device={device!r} is not available: this machine has {count} CUDA "
+                f"device(s); allowed: cpu, cuda, cuda:0..cuda:{count - 1}"
+            )
+    elif parsed.type != "cpu":
+        raise ConfigError(f"device={device!r} is not supported; use cpu, cuda or cuda:N")
+    return device
+
+
+# --- benchmarks (`vdtn-marl bench`) ---------------------------------------------------------
+
+
+@dataclass
+class BenchmarkConfig:
+    """A benchmark: ``scenarios`` × ``methods`` × ``seeds``, every run with ``experiment``.
+
+    A method is the list of command-line overrides that selects it, e.g.
+    ``["rra=jocc", "control=learned"]``. ``version`` names the benchmark's definition in
+    published results; bump it whenever scenarios, methods, seeds or budgets change.
+    """
+
+    name: str = "smoke"
+    version: str = "0.1"
+    experiment: str = "smoke"
+    scenarios: list[str] = field(default_factory=lambda: ["platoon4"])
+    methods: dict[str, list[str]] = field(default_factory=dict)
+    seeds: list[int] = field(default_factory=lambda: [0])
+
+
+@dataclass
+class BenchConfig:
+    """Root config of ``vdtn-marl bench``."""
+
+    benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    device: str = "cpu"
+    progress: bool = True
+
+
+def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
+    """Check the shape of a benchmark (the runs themselves are checked by :func:`validate`)."""
+    b = cfg.benchmark
+    if not b.version:
+        raise ConfigError("benchmark.version='' must name the benchmark's version, e.g. '0.1'")
+    for key in ("scenarios", "methods", "seeds"):
+        if not getattr(b, key):
+            raise ConfigError(f"benchmark.{key}=[] is empty; list at least one")
+    for seed in b.seeds:
+        _positive_int("benchmark.seeds", seed, low=0, high=2**63 - 1)
+    return cfg
+
+
+def register_configs() -> None:
+    """Register the schemas in Hydra's ConfigStore (``run_schema``, ``bench_schema``).
+
+    ``conf/config.yaml`` and ``conf/bench.yaml`` list them first in their defaults, so every
+    composed config is typed by these dataclasses: an unknown key or a value of the wrong type
+    fails at composition. Ranges are checked afterwards by :func:`validate`.
+    """
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance()
+    store.store(name="run_schema", node=RunConfig)
+    store.store(name="bench_schema", node=BenchConfig)
