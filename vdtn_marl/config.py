@@ -138,6 +138,7 @@ class RunConfig:
     task: str = "control"  # for `train`: control (π*), control_impaired (π̃) or rra
     seed: int = 0
     device: str = "cpu"
+    threads: int = 1  # torch CPU threads of this run (0: torch's default, one per core)
     resume: bool = False
     checkpoint: str | None = None  # for `eval` (and to start from trained policies)
     progress: bool = True
@@ -206,6 +207,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     for key in ("control_iterations", "rra_iterations", "checkpoint_every"):
         _positive_int(f"experiment.{key}", getattr(e, key), low=0)
     _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
+    _positive_int("threads", cfg.threads, low=0, high=1024)
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     if e.eval_intervals > s.episode_intervals:
         raise ConfigError(

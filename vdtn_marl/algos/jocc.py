@@ -109,6 +109,10 @@ class JointOptimisation:
         self.run_dir = Path(run_dir)
         self.params = cfg.twin_params()
         self.device = torch.device(cfg.device)
+        if cfg.threads:
+            # small per-step tensors: one thread avoids oversubscription, and parallel sweep
+            # jobs on one machine do not fight over cores
+            torch.set_num_threads(cfg.threads)
         torch.manual_seed(cfg.seed)
         algo, control, rra = cfg.algo, cfg.control, cfg.rra
         self.control_learned = control.name == "learned"

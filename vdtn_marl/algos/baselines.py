@@ -1,0 +1,690 @@
+"""Non-learned baselines of the benchmark: RRA heuristics and the control oracle.
+
+Radio resource allocation (RRA) policies map RRA observations ``[..., L, D]`` (NumPy or torch,
+docs/model.md §4.6) to integer actions ``[..., L]`` of the same kind, like
+:class:`~vdtn_marl.envs.policies.RandomRRAPolicy`:
+
+- ``"random"``: :class:`~vdtn_marl.envs.policies.RandomRRAPolicy` (uniform sub-channel × power).
+- ``"round_robin"``: :class:`RoundRobinRRAPolicy`, link i on sub-channel (i + t) mod M at a
+  fixed power level, t the subframe counter.
+- ``"greedy"``: :class:`GreedyRRAPolicy`, maximum power on the sub-channel with the best
+  estimated V2V SINR (own SNR against the V2I user's interference) read from the observation.
+
+Control baselines map vehicle observations ``[B, F, 8]`` to commands ``[B, F]`` (m/s²):
+
+- ``"cacc"``: the linear CACC on the (possibly delayed) observation,
+  :class:`~vdtn_marl.sim.cacc.CACCController` (not duplicated here).
+- ``"oracle"``: :class:`OracleController`, receding-horizon optimisation of the control reward
+  on the twin's true state and the leader's known future trace: the perfect-observation,
+  model-predictive lower bound on control cost. It reads the twin, not the observation: use
+  :meth:`OracleController.bind` to get an observation → command callable.
+
+Action encoding (``vdtn_marl.sim.link.ActionTables``): a = c·P + l for sub-channel c ∈ [0, M)
+and power level l ∈ [0, P); ``RadioParams.v2v_power_levels_dbm`` lists levels 0..P−2 (23, 15,
+5 dBm by default, level 0 the highest) and the last level P−1 is "off".
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.link import RRA_OBS_GAIN_SCALE_DB
+from vdtn_marl.sim.params import PlatoonParams, RadioParams, TwinParams
+from vdtn_marl.sim.platoon import (
+    PlatoonState,
+    control_reward,
+    desired_gaps_m,
+    gaps_m,
+    perfect_observation,
+)
+from vdtn_marl.sim.twin import RRA_CONTROL_FEATURES, DigitalTwin
+
+__all__ = [
+    "CONTROL_BASELINES",
+    "RRA_BASELINES",
+    "GreedyRRAPolicy",
+    "OracleController",
+    "RRAFeatureLayout",
+    "RoundRobinRRAPolicy",
+    "encode_rra_action",
+    "make_control_baseline",
+    "make_rra_baseline",
+    "max_power_level",
+]
+
+_LN10_OVER_10 = math.log(10.0) / 10.0
+
+
+# ---------------------------------------------------------------------- RRA helpers
+@dataclass(frozen=True)
+class RRAFeatureLayout:
+    """Where each feature block sits in an RRA observation of ``dim`` = 4M + 6 features.
+
+    Derived from :meth:`DigitalTwin._rra_observation_buffer` and
+    :func:`vdtn_marl.sim.link.rra_static_observation` (docs/model.md §4.6), for M sub-channels:
+
+    ====================  ============  ====================================================
+    block                 indices       content (per sub-channel where there are M of them)
+    ====================  ============  ====================================================
+    ``own_snr``           [0, M)        own V2V link SNR at maximum power, in 10 dB units
+    ``bs_interference``   [M, 2M)       INR it would cause at the BS at maximum power, 10 dB
+    ``v2i_interference``  [2M, 3M)      INR it receives from the V2I user of each
+                                        sub-channel, in 10 dB units
+    ``occupancy``         [3M, 4M)      V2V links that transmitted on it last subframe / L
+    ``bits_left``         4M            fraction of the CAM bits still to send
+    ``time_left``         4M + 1        fraction of the interval left
+    ``control``           [4M+2, dim)   e_p/15 m, e_v/10 m/s, a_pred/2.6, u_prev/2.6
+    ====================  ============  ====================================================
+
+    The three CSI blocks are clipped to ``RRA_OBS_GAIN_CLIP`` (−50 dB … 150 dB).
+    """
+
+    num_subchannels: int
+    own_snr: slice
+    bs_interference: slice
+    v2i_interference: slice
+    occupancy: slice
+    bits_left: int
+    time_left: int
+    control: slice
+    dim: int
+
+    @classmethod
+    def from_radio(cls, radio: RadioParams) -> RRAFeatureLayout:
+        m = radio.num_subchannels
+        return cls(
+            num_subchannels=m,
+            own_snr=slice(0, m),
+            bs_interference=slice(m, 2 * m),
+            v2i_interference=slice(2 * m, 3 * m),
+            occupancy=slice(3 * m, 4 * m),
+            bits_left=4 * m,
+            time_left=4 * m + 1,
+            control=slice(4 * m + 2, 4 * m + 2 + RRA_CONTROL_FEATURES),
+            dim=4 * m + 2 + RRA_CONTROL_FEATURES,
+        )
+
+
+def encode_rra_action(subchannel, power_level, num_power_levels: int):
+    """RRA action index a = sub-channel·P + power level (inverse of ``link.ActionTables``).
+
+    Works elementwise on ints, NumPy arrays and torch tensors.
+    """
+    return subchannel * num_power_levels + power_level
+
+
+def max_power_level(radio: RadioParams) -> int:
+    """Index of the highest transmit power in ``radio.v2v_power_levels_dbm`` (0 by default)."""
+    return int(np.argmax(radio.v2v_power_levels_dbm))
+
+
+def _check_power_level(power_level: int, num_power_levels: int) -> None:
+    if (
+        isinstance(power_level, bool)
+        or not isinstance(power_level, int | np.integer)
+        or not 0 <= power_level < num_power_levels
+    ):
+        raise ValueError(
+            f"power_level={power_level!r} must be an integer in [0, {num_power_levels - 1}] "
+            f"(level {num_power_levels - 1} is 'off')"
+        )
+
+
+def _check_links(observation, num_links: int, dim: int | None = None) -> None:
+    shape = tuple(observation.shape)
+    if len(shape) < 2 or shape[-2] != num_links or (dim is not None and shape[-1] != dim):
+        want = f"[..., {num_links}, {dim if dim is not None else 'D'}]"
+        raise ValueError(f"RRA observation has shape {shape}, expected {want}")
+
+
+class RoundRobinRRAPolicy:
+    """Fixed rotating allocation: link i on sub-channel (i + t) mod M at ``power_level``.
+
+    t counts the calls (one per 1 ms subframe) since construction or :meth:`reset`; with
+    L ≤ M the links use distinct sub-channels in every subframe. Called with RRA observations
+    ``[..., L, D]`` (NumPy or torch); returns integer actions ``[..., L]`` of the same kind
+    (int64). ``power_level`` indexes ``RadioParams.v2v_power_levels_dbm`` (0 = 23 dBm by
+    default); the last level ``num_power_levels − 1`` is "off".
+    """
+
+    def __init__(
+        self, num_links: int, num_subchannels: int, num_power_levels: int, power_level: int = 0
+    ):
+        for name, value in (
+            ("num_links", num_links),
+            ("num_subchannels", num_subchannels),
+            ("num_power_levels", num_power_levels),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        _check_power_level(power_level, num_power_levels)
+        self.num_links = int(num_links)
+        self.num_subchannels = int(num_subchannels)
+        self.num_power_levels = int(num_power_levels)
+        self.power_level = int(power_level)
+        self._links = np.arange(self.num_links)
+        self._links_torch: dict[torch.device, torch.Tensor] = {}
+        self.reset()
+
+    def seed(self, seed: int | None) -> None:
+        """No randomness; resets the subframe counter (API symmetry with the random policy)."""
+        self.reset()
+
+    def reset(self) -> None:
+        """Restart the rotation at t = 0."""
+        self.t = 0
+
+    def __call__(self, observation):
+        _check_links(observation, self.num_links)
+        t, self.t = self.t, self.t + 1
+        if isinstance(observation, np.ndarray):
+            channel = (self._links + t) % self.num_subchannels
+            actions = encode_rra_action(channel, self.power_level, self.num_power_levels)
+            return np.broadcast_to(actions, observation.shape[:-1]).astype(np.int64)
+        dev = observation.device
+        links = self._links_torch.get(dev)
+        if links is None:
+            links = self._links_torch[dev] = torch.arange(self.num_links, device=dev)
+        channel = (links + t) % self.num_subchannels
+        actions = encode_rra_action(channel, self.power_level, self.num_power_levels)
+        return actions.expand(observation.shape[:-1]).clone()
+
+
+class GreedyRRAPolicy:
+    """Each link transmits at maximum power on its best sub-channel, read from the observation.
+
+    Score of sub-channel m for link i (dB): the estimated SINR against the V2I user on m,
+
+        s_m = SNR_m − 10·log10(1 + INR_m),
+
+    with SNR_m the own-link SNR at maximum power (``own_snr`` block) and INR_m the V2I user's
+    interference-to-noise ratio at the link's receiver (``v2i_interference`` block), both in dB
+    (:class:`RRAFeatureLayout`). For INR ≫ 1 this is SNR − INR. Interference from the other
+    V2V links and the harm done to the V2I uplink are ignored (greedy, uncoordinated). Ties go
+    to the lowest sub-channel. Batched: observations ``[..., L, D]`` (NumPy or torch) →
+    int64 actions ``[..., L]`` of the same kind.
+
+    Args:
+        num_links: L V2V links (followers).
+        radio: radio parameters (M, power levels); defaults to ``RadioParams()``.
+        power_level: power level used (default: the highest, :func:`max_power_level`).
+    """
+
+    def __init__(
+        self, num_links: int, radio: RadioParams | None = None, power_level: int | None = None
+    ):
+        if isinstance(num_links, bool) or not isinstance(num_links, int | np.integer):
+            raise ValueError(f"num_links={num_links!r} must be an integer >= 1")
+        if num_links < 1:
+            raise ValueError(f"num_links={num_links!r} must be an integer >= 1")
+        radio = radio or RadioParams()
+        self.num_links = int(num_links)
+        self.layout = RRAFeatureLayout.from_radio(radio)
+        self.num_power_levels = radio.num_power_levels
+        self.power_level = max_power_level(radio) if power_level is None else power_level
+        _check_power_level(self.power_level, self.num_power_levels)
+
+    def seed(self, seed: int | None) -> None:
+        """Deterministic policy: nothing to seed (API symmetry)."""
+
+    def reset(self) -> None:
+        """Stateless policy: nothing to reset (API symmetry)."""
+
+    def scores_db(self, observation):
+        """Estimated SINR s_m (dB) of each sub-channel, ``[..., L, M]``."""
+        _check_links(observation, self.num_links, self.layout.dim)
+        lay = self.layout
+        snr_db = observation[..., lay.own_snr] * RRA_OBS_GAIN_SCALE_DB
+        inr_db = observation[..., lay.v2i_interference] * RRA_OBS_GAIN_SCALE_DB
+        if isinstance(observation, np.ndarray):
+            soft = np.logaddexp(0.0, inr_db * _LN10_OVER_10)
+        else:
+            soft = torch.logaddexp(torch.zeros_like(inr_db), inr_db * _LN10_OVER_10)
+        return snr_db - soft / _LN10_OVER_10  # 10·log10(1 + 10^(INR/10))
+
+    def __call__(self, observation):
+        best = self.scores_db(observation).argmax(-1)
+        actions = encode_rra_action(best, self.power_level, self.num_power_levels)
+        return actions.astype(np.int64) if isinstance(actions, np.ndarray) else actions.long()
+
+
+# ---------------------------------------------------------------------- oracle
+@contextmanager
+def _intra_op_threads(threads: int | None, device: torch.device):
+    """Temporarily set torch's intra-op thread count for CPU work (restored on exit)."""
+    before = torch.get_num_threads()
+    if threads is None or device.type != "cpu" or threads == before:
+        yield
+        return
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
+class OracleController:
+    """Model-predictive control on the twin's true state with the leader's future known.
+
+    At each control interval k it maximises, jointly for the F followers of each of the B
+    scenarios, the summed (optionally discounted) control reward of docs/model.md §2.3
+    (:func:`~vdtn_marl.sim.platoon.control_reward` plus the collision penalty, as in
+    :mod:`vdtn_marl.voi`) over the next ``horizon_intervals`` intervals, with the commands
+    U ∈ [u_min, u_max]^{H×F} (m/s²) as decision variables, and applies the first (receding
+    horizon). It is the perfect-observation, model-predictive lower bound on control cost
+    that the impaired systems are compared with.
+
+    Planning model: the interval map of the twin's own :class:`IntervalIntegrator`
+    (``phi_t``, ``input_gain``, ``leader_pos_gain``), unrolled in closed form over the
+    horizon, z_{h+1} = Φ^{h+1} z_0 + Σ_{j≤h} Φ^{h−j} G u_j, so a whole horizon costs one small
+    matmul and is differentiable in U. It equals H calls of ``integrator.integrate`` as long as
+    no follower's speed reaches the 0 m/s clamp (the twin clamps, the plan does not). The
+    leader follows ``twin.leader_accel_mps2`` over the horizon. The first interval uses the
+    true switch subframe when one is given (u_{k−1} in force until then); later intervals
+    assume switch 0 (perfect observation).
+
+    Horizon: the Lei/Liu reward charges |u| and jerk at once but a gap error only as it
+    builds up (quadratically in time), so a short horizon lets a follower lag behind an
+    accelerating leader (at H = 15 it drifts 9 m behind during a 4 s acceleration event and
+    collides in braking events). The default covers 6 s, longer than any synthetic event
+    (1–4 s); longer horizons did not help at 40–80 Adam steps.
+
+    Solver: projected Adam (clamp to the actuator bounds after each step) on the
+    subgradients of the piecewise-linear reward, float32, learning rate decayed linearly to
+    10 %. The collision indicator has no gradient, so the optimised loss adds the hinge
+    |penalty|·max(0, −gap) (gap in m); the plan kept per scenario is the best one seen under
+    the true objective. Warm start: the previous plan shifted by one interval for scenarios
+    whose interval advanced by one since the last call; otherwise (first call,
+    :meth:`reset`, a scenario reset in the twin, another batch shape) a closed-loop rollout of
+    ``reference`` (CACC) on perfect observations, so a fresh plan is never worse than CACC over
+    the horizon, in the model.
+
+    Cost (measured on 2 CPU cores, B = 16): ≈ 50–100 ms per call with the defaults, i.e.
+    10–20 s for 200 intervals.
+
+    Args:
+        horizon_intervals: H, intervals planned ahead (50 ms each).
+        iterations: Adam steps per control interval.
+        lr: Adam step size (m/s²).
+        discount: per-interval discount of the planned reward (1 = plain sum).
+        reference: warm-start controller, perfect observations [B, F, 8] → commands [B, F]
+            (default: CACC with the twin's platoon parameters).
+        cpu_threads: torch intra-op threads while planning on a CPU twin (restored after).
+            The tensors are tiny, so extra threads only add synchronisation, which costs
+            tens of ms per op on a loaded machine; None leaves torch's setting alone.
+    """
+
+    def __init__(
+        self,
+        horizon_intervals: int = 120,
+        iterations: int = 60,
+        lr: float = 0.1,
+        discount: float = 1.0,
+        reference: Callable[[torch.Tensor], torch.Tensor] | None = None,
+        cpu_threads: int | None = 1,
+    ):
+        for name, value, low in (
+            ("horizon_intervals", horizon_intervals, 1),
+            ("iterations", iterations, 0),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ValueError(f"{name}={value!r} must be an integer >= {low}")
+        if not lr > 0:
+            raise ValueError(f"lr={lr!r} must be > 0")
+        if not 0.0 < discount <= 1.0:
+            raise ValueError(f"discount={discount!r} is outside (0, 1]")
+        if cpu_threads is not None and (
+            isinstance(cpu_threads, bool) or not isinstance(cpu_threads, int) or cpu_threads < 1
+        ):
+            raise ValueError(f"cpu_threads={cpu_threads!r} must be an integer >= 1 or None")
+        self.horizon_intervals = horizon_intervals
+        self.iterations = iterations
+        self.lr = float(lr)
+        self.discount = float(discount)
+        self.reference = reference
+        self.cpu_threads = cpu_threads
+        self._model: tuple | None = None
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the previous plan (warm start); the next call starts from the reference."""
+        self._last_plan: torch.Tensor | None = None  # [H, B, F], time-major
+        self._last_interval: torch.Tensor | None = None  # [B]
+
+    def seed(self, seed: int | None) -> None:
+        """Deterministic controller: resets the warm start (API symmetry)."""
+        self.reset()
+
+    # ------------------------------------------------------------------ model
+    def _matrices(self, twin: DigitalTwin) -> dict:
+        """Horizon matrices of the twin's integrator (cached per integrator).
+
+        ``powers`` [H+1, 3, 3]: Φ^h. ``response`` [2H, H]: row c·H + h maps the plan to
+        component c (0: position m, 1: speed m/s) of a follower after interval h,
+        Σ_{j≤h} (Φ^{h−j} G)_c u_j with G = G_T, the input gain of a full interval.
+        """
+        integ = twin.integrator
+        if self._model is not None and self._model[0] is integ:
+            return self._model[1]
+        h_max = self.horizon_intervals
+        phi = integ.phi_t.double()
+        dev = phi.device
+        powers = [torch.eye(3, dtype=torch.float64, device=dev)]
+        for _ in range(h_max):
+            powers.append(phi @ powers[-1])
+        powers = torch.stack(powers)
+        impulse = powers[:h_max] @ integ.input_gain[-1].double()  # [H, 3]: Φ^n G
+        lag = torch.arange(h_max, device=dev)[:, None] - torch.arange(h_max, device=dev)
+        response = torch.where((lag >= 0)[None], impulse[lag.clamp_min(0)].permute(2, 0, 1), 0.0)
+        dtype = integ.phi_t.dtype
+        mats = {
+            "powers": powers.to(dtype),
+            "response": response[:2].reshape(2 * h_max, h_max).to(dtype),
+        }
+        self._model = (integ, mats)
+        return mats
+
+    def _context(self, twin: DigitalTwin, switch_subframe: torch.Tensor | None) -> dict:
+        """Everything the objective needs that does not depend on the plan (time-major)."""
+        pp = twin.params.platoon
+        integ = twin.integrator
+        h_max = self.horizon_intervals
+        state: PlatoonState = twin.platoon
+        b, f = state.position_m.shape[0], pp.num_followers
+        dev, dtype = state.position_m.device, integ.phi_t.dtype
+        mats = self._matrices(twin)
+        powers = mats["powers"]
+
+        # the leader as IntervalIntegrator moves it, relative to its current position (m)
+        steps = torch.arange(h_max, device=dev)
+        lead_a = twin.leader_accel_mps2(twin.interval[:, None] + steps).to(dtype).T  # [H, B]
+        dt = pp.control_interval_s
+        lead_v = (state.speed_mps[:, 0].to(dtype) + dt * lead_a.cumsum(0)).clamp_min(0.0)
+        v_before = torch.cat([state.speed_mps[None, :, 0].to(dtype), lead_v[:-1]], dim=0)
+        lead_p = (dt * v_before + integ.leader_pos_gain * lead_a).cumsum(0)
+
+        z0 = torch.stack(
+            [
+                (state.position_m[:, 1:] - state.position_m[:, :1]).to(dtype),
+                state.speed_mps[:, 1:].to(dtype),
+                state.accel_mps2[:, 1:].to(dtype),
+            ],
+            dim=-1,
+        )  # [B, F, 3]
+        # free response Φ^{h+1} z_0, position and speed: [2, H, B, F]
+        free = torch.einsum("hcd,bfd->chbf", powers[1:, :2], z0).contiguous()
+        switch_gap = None
+        if switch_subframe is not None:
+            switch = torch.as_tensor(switch_subframe, device=dev).long()
+            if tuple(switch.shape) != (b, f):
+                raise ValueError(
+                    f"switch_subframe has shape {tuple(switch.shape)}, expected {(b, f)}"
+                )
+            t = pp.subframes_per_interval
+            gain_gap = integ.input_gain[t] - integ.input_gain[t - switch.clamp(0, t)]
+            # response to (u_{k−1} − u_k) in the first interval: Φ^h (G_T − G_{T−d})
+            switch_gap = torch.einsum("hcd,bfd->chbf", powers[:-1, :2], gain_gap).contiguous()
+        return {
+            "lead_p": lead_p[..., None],  # [H, B, 1]
+            "lead_v": lead_v[..., None],
+            "free": free,
+            "u_prev": state.command_mps2[:, 1:].to(dtype),  # [B, F]
+            "switch_gap": switch_gap,
+            "weights": self.discount ** steps.to(dtype)[:, None],  # [H, 1]
+            "params": pp,
+            **mats,
+        }
+
+    def _objective(
+        self, ctx: dict, plan: torch.Tensor, moved: torch.Tensor
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(true planned return [B], differentiable loss) of a time-major plan [H, B, F]
+        whose forced response (position, speed) is ``moved`` [2, H, B, F]."""
+        pp: PlatoonParams = ctx["params"]
+        h_max, b, f = plan.shape
+        z = ctx["free"] + moved
+        if ctx["switch_gap"] is not None:
+            z = z + ctx["switch_gap"] * (ctx["u_prev"] - plan[0])
+        position = torch.cat([ctx["lead_p"], z[0]], dim=-1).view(h_max * b, f + 1)
+        speed = torch.cat([ctx["lead_v"], z[1]], dim=-1).view(h_max * b, f + 1)
+        gap = gaps_m(position, pp)  # [H·B, F]
+        gap_error = gap - desired_gaps_m(speed, pp)
+        speed_error = speed[:, :-1] - speed[:, 1:]
+        prev = torch.cat([ctx["u_prev"][None], plan[:-1]], dim=0)
+        reward = control_reward(
+            gap_error.view(h_max, b, f), speed_error.view(h_max, b, f), plan, prev, pp
+        )
+        gap = gap.view(h_max, b, f)
+        reward = reward + (gap <= 0).to(reward.dtype) * pp.collision_penalty
+        planned = (reward.sum(-1) * ctx["weights"]).sum(0)  # [B]
+        hinge = abs(pp.collision_penalty) * torch.relu(-gap).sum()
+        return planned.detach(), hinge - planned.sum()
+
+    def _plan_objective(self, ctx: dict, plan: torch.Tensor):
+        """Objective of a time-major plan [H, B, F] → (planned return [B], loss)."""
+        h_max, b, f = plan.shape
+        moved = (ctx["response"] @ plan.reshape(h_max, b * f)).view(2, h_max, b, f)
+        return self._objective(ctx, plan, moved)
+
+    def _reference_plan(self, twin: DigitalTwin) -> torch.Tensor:
+        """Closed-loop rollout of the reference controller on perfect observations, [H, B, F]."""
+        pp = twin.params.platoon
+        policy = self.reference or CACCController(pp)
+        state = twin.platoon
+        steps = torch.arange(self.horizon_intervals, device=state.position_m.device)
+        lead_a = twin.leader_accel_mps2(twin.interval[:, None] + steps)
+        zero = torch.zeros_like(state.command_mps2[:, 1:], dtype=torch.long)
+        plan = []
+        for h in range(self.horizon_intervals):
+            u = policy(perfect_observation(state, pp)).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
+            plan.append(u)
+            state = twin.integrator.integrate(state, lead_a[:, h], u, zero)
+        return torch.stack(plan)
+
+    # ------------------------------------------------------------------ public
+    def planned_return(
+        self,
+        twin: DigitalTwin,
+        plan_mps2: torch.Tensor,
+        switch_subframe: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """Planned (discounted) control return [B] of command plans ``[B, H, F]`` (m/s²).
+
+        The sum over the horizon and the followers of the control reward and collision
+        penalty the twin would pay from its current state on its leader trace.
+        """
+        pp = twin.params.platoon
+        with torch.no_grad(), _intra_op_threads(self.cpu_threads, twin.device):
+            ctx = self._context(twin, switch_subframe)
+            plan = plan_mps2.to(ctx["free"].dtype).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
+            return self._plan_objective(ctx, plan.transpose(0, 1).contiguous())[0]
+
+    def plan(self, twin: DigitalTwin, switch_subframe: torch.Tensor | None = None) -> torch.Tensor:
+        """Optimised command plans ``[B, H, F]`` (m/s²) from the twin's current state.
+
+        ``switch_subframe`` [B, F] (0..T) is when the first command takes force in the current
+        interval (None: 0, perfect observation). Updates the warm start.
+        """
+        with _intra_op_threads(self.cpu_threads, twin.device):
+            return self._plan(twin, switch_subframe).transpose(0, 1)
+
+    def _plan(self, twin: DigitalTwin, switch_subframe: torch.Tensor | None) -> torch.Tensor:
+        pp = twin.params.platoon
+        lo, hi = pp.accel_min_mps2, pp.accel_max_mps2
+        h_max, b, f = self.horizon_intervals, twin.batch_size, pp.num_followers
+        with torch.no_grad():
+            ctx = self._context(twin, switch_subframe)
+            dtype = ctx["free"].dtype
+            last, last_interval = self._last_plan, self._last_interval
+            warm = torch.zeros(b, dtype=torch.bool, device=twin.device)
+            if last is not None and last.shape == (h_max, b, f) and last.device == twin.device:
+                warm = twin.interval == last_interval + 1
+            if bool(warm.all()):
+                best = torch.cat([last[1:], last[-1:]], dim=0)
+            else:
+                best = self._reference_plan(twin).to(dtype)
+                if bool(warm.any()):
+                    shifted = torch.cat([last[1:], last[-1:]], dim=0)
+                    best = torch.where(warm[:, None], shifted, best)
+            best_value = self._plan_objective(ctx, best)[0]
+
+        # projected Adam, written out (a handful of ops on one small tensor)
+        beta1, beta2, eps = 0.9, 0.999, 1e-8
+        x = best.clone()
+        moment1 = torch.zeros_like(x)
+        moment2 = torch.zeros_like(x)
+        for it in range(self.iterations + 1):
+            x.requires_grad_(it < self.iterations)
+            value, loss = self._plan_objective(ctx, x)
+            with torch.no_grad():
+                if it > 0:  # iterate 0 is the warm start, already scored
+                    better = value > best_value
+                    best = torch.where(better[:, None], x.detach(), best)
+                    best_value = torch.where(better, value, best_value)
+            if it == self.iterations:
+                break
+            (grad,) = torch.autograd.grad(loss, x)
+            with torch.no_grad():
+                x = x.detach()
+                moment1.mul_(beta1).add_(grad, alpha=1.0 - beta1)
+                moment2.mul_(beta2).addcmul_(grad, grad, value=1.0 - beta2)
+                step = self.lr * (1.0 - 0.9 * it / self.iterations) / (1.0 - beta1 ** (it + 1))
+                denom = (moment2 / (1.0 - beta2 ** (it + 1))).sqrt_().add_(eps)
+                x = x.addcdiv(moment1, denom, value=-step).clamp_(lo, hi)
+        self._last_plan, self._last_interval = best, twin.interval.clone()
+        return best
+
+    def __call__(
+        self, twin: DigitalTwin, switch_subframe: torch.Tensor | None = None
+    ) -> torch.Tensor:
+        """Commands ``[B, F]`` (m/s²) for the twin's current interval: the plan's first step."""
+        return self.plan(twin, switch_subframe)[:, 0].to(torch.float32)
+
+    def bind(self, twin: DigitalTwin, perfect: bool | None = None) -> Callable:
+        """A control-module callable: vehicle observations ``[B, F, 8]`` → commands ``[B, F]``.
+
+        The observation is only used for its shape and device; the commands come from the
+        twin's true state and future leader trace. ``perfect`` (default: ``not
+        twin.radio_enabled``) says how the twin will integrate the interval: with perfect
+        observation the command takes force at once, otherwise at the CAM's switch subframe
+        (``twin.switch_subframe(perfect=False)``, known once the interval's subframes ran).
+        The bound callable plans with a copy of this controller, with its own warm start, so
+        one controller can be bound to several twins. Example: ``env.control_module =
+        OracleController().bind(env.twin)`` on a ``VDTNTorchRLEnv(mode="rra")``.
+        """
+        bound = copy.copy(self)
+        bound.reset()
+        return _BoundOracle(bound, twin, perfect)
+
+
+class _BoundOracle:
+    """:class:`OracleController` bound to one twin; see :meth:`OracleController.bind`."""
+
+    def __init__(self, oracle: OracleController, twin: DigitalTwin, perfect: bool | None):
+        self.oracle = oracle
+        self.twin = twin
+        self.perfect = (not twin.radio_enabled) if perfect is None else bool(perfect)
+
+    def reset(self) -> None:
+        """Forget the warm start."""
+        self.oracle.reset()
+
+    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        twin = self.twin
+        expected = (twin.batch_size, twin.num_followers)
+        if tuple(observation.shape[:-1]) != expected:
+            raise ValueError(
+                f"vehicle observation has shape {tuple(observation.shape)}, "
+                f"expected {(*expected, 8)} (the bound twin's batch)"
+            )
+        switch = None if self.perfect else twin.switch_subframe(perfect=False)
+        u = self.oracle(twin, switch)
+        obs = torch.as_tensor(observation)
+        return u.to(device=obs.device, dtype=obs.dtype if obs.is_floating_point() else u.dtype)
+
+
+# ---------------------------------------------------------------------- registries
+RRA_BASELINES: dict[str, type] = {
+    "random": RandomRRAPolicy,
+    "round_robin": RoundRobinRRAPolicy,
+    "greedy": GreedyRRAPolicy,
+}
+CONTROL_BASELINES: dict[str, type] = {
+    "cacc": CACCController,
+    "oracle": OracleController,
+}
+
+
+def _twin_params(twin_or_params) -> tuple[TwinParams, DigitalTwin | None]:
+    if isinstance(twin_or_params, DigitalTwin):
+        return twin_or_params.params, twin_or_params
+    if isinstance(twin_or_params, TwinParams):
+        return twin_or_params, None
+    if twin_or_params is None:
+        return TwinParams(), None
+    raise TypeError(f"expected a DigitalTwin or TwinParams, got {type(twin_or_params).__name__}")
+
+
+def make_rra_baseline(
+    name: str, twin_or_params: DigitalTwin | TwinParams | None = None, seed: int | None = None
+):
+    """An RRA baseline by name (``"random"``, ``"round_robin"``, ``"greedy"``).
+
+    Sizes (L links, M sub-channels, P power levels) come from the twin or the parameters
+    (default ``TwinParams()``). ``seed`` seeds ``"random"`` (the others are deterministic).
+    Round robin and greedy transmit at the highest power level.
+    """
+    if name not in RRA_BASELINES:
+        raise ValueError(
+            f"RRA baseline {name!r} is not one of {', '.join(repr(k) for k in RRA_BASELINES)}"
+        )
+    params, _ = _twin_params(twin_or_params)
+    radio, links = params.radio, params.platoon.num_followers
+    if name == "random":
+        return RandomRRAPolicy(radio.num_actions, seed)
+    if name == "round_robin":
+        return RoundRobinRRAPolicy(
+            links, radio.num_subchannels, radio.num_power_levels, max_power_level(radio)
+        )
+    return GreedyRRAPolicy(links, radio)
+
+
+def make_control_baseline(
+    name: str, params: DigitalTwin | TwinParams | PlatoonParams | None = None, **kwargs
+):
+    """A control baseline by name (``"cacc"``, ``"oracle"``).
+
+    ``"cacc"`` returns a :class:`~vdtn_marl.sim.cacc.CACCController` for the platoon
+    parameters (observations ``[B, F, 8]`` → commands ``[B, F]``). ``"oracle"`` needs the
+    twin's true state: given a :class:`DigitalTwin` it returns the bound callable
+    ``OracleController(**kwargs).bind(twin)``; given parameters it returns the unbound
+    :class:`OracleController` — call ``.bind(twin)`` before using it as a control module.
+    ``kwargs`` go to the controller's constructor.
+    """
+    if name not in CONTROL_BASELINES:
+        raise ValueError(
+            f"control baseline {name!r} is not one of "
+            f"{', '.join(repr(k) for k in CONTROL_BASELINES)}"
+        )
+    twin = params if isinstance(params, DigitalTwin) else None
+    if name == "cacc":
+        if isinstance(params, PlatoonParams):
+            platoon = params
+        else:
+            platoon = _twin_params(params)[0].platoon
+        return CACCController(platoon, **kwargs)
+    if params is not None and not isinstance(params, DigitalTwin | TwinParams | PlatoonParams):
+        raise TypeError(
+            f"expected a DigitalTwin, TwinParams or PlatoonParams, got {type(params).__name__}"
+        )
+    oracle = OracleController(**kwargs)
+    return oracle.bind(twin) if twin is not None else oracle
