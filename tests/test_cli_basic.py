@@ -1,4 +1,4 @@
-"""The small argparse CLI: `envs` table, `rollout` forwarding, usage errors."""
+"""The CLI without Hydra: `envs` table, `rollout` forwarding, help, usage errors."""
 
 from __future__ import annotations
 
@@ -52,3 +52,24 @@ def test_unknown_or_missing_command_is_usage_error(argv, capsys):
         cli.main(argv)
     assert info.value.code == 2
     assert "usage:" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    "argv,command,rest",
+    [
+        (["jocc", "seed=1"], "jocc", ["seed=1"]),
+        (["-m", "jocc", "seed=0,1"], "jocc", ["-m", "seed=0,1"]),
+        (["--cfg", "job", "train", "task=rra"], "train", ["--cfg", "job", "task=rra"]),
+        (["-m", "rra.kappa1=0,1", "jocc"], "jocc", ["-m", "rra.kappa1=0,1"]),
+        (["--info", "defaults", "eval"], "eval", ["--info", "defaults"]),
+        (["-m"], None, ["-m"]),
+    ],
+)
+def test_split_command_finds_the_command_word_among_hydra_flags(argv, command, rest):
+    assert cli.split_command(argv) == (command, rest)
+
+
+def test_help_needs_no_command(capsys):
+    assert cli.main(["--help"]) == 0
+    out = capsys.readouterr().out
+    assert "commands:" in out and "config groups" in out and "platoon4*" in out

@@ -1,17 +1,138 @@
-"""Command-line interface: ``vdtn-marl envs`` and ``vdtn-marl rollout [args]``."""
+"""The ``vdtn-marl`` command: a Hydra app with one command word per entry point.
+
+    vdtn-marl [-m] COMMAND [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]
+
+``train``, ``jocc`` and ``eval`` compose ``conf/config.yaml`` (schema
+:class:`vdtn_marl.config.RunConfig`) and call :mod:`vdtn_marl.algos.api`; ``bench`` composes
+``conf/bench.yaml`` (``bench summarize DIR`` tables a finished sweep); ``envs`` lists the
+registry; ``rollout`` forwards to :mod:`vdtn_marl.rollout`.
+
+How a Hydra command runs:
+
+1. The command word is taken out of the arguments; Hydra's own argument parser reads the rest.
+2. Pre-pass: every job's config is composed with Hydra's compose API (for ``-m``, one per
+   combination of the sweep, expanded as Hydra's basic sweeper does), converted to a
+   :class:`RunConfig`, and checked by :func:`vdtn_marl.config.validate` and
+   :func:`vdtn_marl.config.validate_device`. A bad config prints one line,
+   ``error: KEY=VALUE ... allowed ...``, and exits with code 2 before anything is written.
+3. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
+   ``--cfg``, ``--info`` behave as in any Hydra app). Each job writes ``config.yaml`` (the
+   resolved config) to its run directory and calls the entry point, which writes
+   ``metrics.csv``, ``checkpoints/`` and ``summary.json`` there.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import importlib
+import importlib.util
 import json
 import os
+import re
 import sys
 import textwrap
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from hydra.experimental.callback import Callback
 
 from vdtn_marl import __version__
 from vdtn_marl.registry import EnvSpec, list_envs, spec
+
+PROG = "vdtn-marl"
+CONFIG_PACKAGE = "vdtn_marl.conf"
+EXIT_CONFIG_ERROR = 2
+
+# Commands whose config is composed by Hydra, and the primary config of each.
+HYDRA_COMMANDS = {"train": "config", "jocc": "config", "eval": "config", "bench": "bench"}
+COMMANDS = {
+    "jocc": "joint optimisation of control and communication (JOCC): the main experiment",
+    "train": "train one agent group: task=control (π*), control_impaired (π̃) or rra",
+    "eval": "evaluate the trained policies of a run (checkpoint=RUN_DIR)",
+    "bench": "benchmarks; `bench summarize DIR` tables a sweep and plots the κ1 Pareto front",
+    "envs": "list the registered environments: agents, clocks, descriptions",
+    "rollout": "a short random-policy rollout of an environment (quick start)",
+}
+GROUPS = {
+    "scenario": "the simulated platoon and radio (size, sub-channels, bandwidth, traces)",
+    "algo": "the MARL learner",
+    "control": "who drives the followers",
+    "rra": "who allocates radio resources, and the RRA reward",
+    "experiment": "budgets: iterations, batch sizes, evaluation episodes",
+}
+# Most used keys of each command: (key, what it does). Defaults are read from conf/.
+COMMON_KEYS = {
+    "jocc": [
+        ("rra.kappa1", "weight κ1 of V2I throughput in the RRA reward, in [0, 1]"),
+        ("rra.kappa2", "weight κ2 of IVoI; null (default) means 1 − κ1"),
+        ("rra.ivoi_estimator", "td or rollout"),
+        ("experiment.jocc_iterations", "JOCC iterations"),
+        ("seed", "random seed"),
+        ("device", "cpu, cuda or cuda:N"),
+        ("resume", "true: continue the run in hydra.run.dir"),
+    ],
+    "train": [
+        ("task", "control (π*, perfect observation), control_impaired (π̃) or rra"),
+        ("experiment.control_iterations", "PPO iterations when training control"),
+        ("experiment.rra_iterations", "PPO iterations when training RRA"),
+        ("algo.num_envs", "scenarios collected in parallel"),
+        ("algo.lr", "learning rate"),
+        ("seed", "random seed"),
+        ("device", "cpu, cuda or cuda:N"),
+        ("resume", "true: continue the run in hydra.run.dir"),
+    ],
+    "eval": [
+        ("checkpoint", "run directory (its checkpoints/last.pt) or checkpoint file; required"),
+        ("experiment.eval_episodes", "scenarios evaluated"),
+        ("experiment.eval_intervals", "control intervals per evaluation episode"),
+        ("seed", "random seed"),
+        ("device", "cpu, cuda or cuda:N"),
+    ],
+}
+EXAMPLES = {
+    "jocc": [
+        "vdtn-marl jocc experiment=smoke",
+        "vdtn-marl jocc rra.kappa1=0.7 seed=3",
+        "vdtn-marl jocc --cfg job",
+        "vdtn-marl -m jocc rra.kappa1=0,0.25,0.5,0.75,1 seed=0,1,2 hydra/launcher=joblib",
+        "vdtn-marl bench summarize multirun/jocc/<date_time>",
+        "vdtn-marl jocc hydra.run.dir=outputs/jocc/<date_time> resume=true",
+    ],
+    "train": [
+        "vdtn-marl train algo=mappo scenario=platoon4 experiment=smoke",
+        "vdtn-marl train task=rra rra=drra algo=ippo",
+        "vdtn-marl train task=control_impaired control.augmentation=false",
+    ],
+    "eval": [
+        "vdtn-marl eval checkpoint=outputs/jocc/<date_time>",
+        "vdtn-marl eval checkpoint=outputs/jocc/<date_time> rra=round_robin",
+    ],
+}
+
+# Hydra flags that take a value (the value is never the command word).
+_VALUE_FLAGS = {
+    "--cfg", "-c", "--package", "-p", "--config-path", "-cp", "--config-name", "-cn",
+    "--config-dir", "-cd", "--experimental-rerun", "--shell-completion", "-sc",
+}  # fmt: skip
+_INFO_CHOICES = {"all", "config", "defaults", "defaults-tree", "plugins", "searchpath"}
+_SCHEMA_WARNING = "(?s).*is validated against ConfigStore schema with the same name"
+
+
+# Our conf/hydra/launcher/*.yaml files carry the names of the launchers' own schemas; Hydra
+# then checks them against those schemas and warns about it on every composition (also in the
+# launchers' worker processes, which import this module to run a job).
+warnings.filterwarnings("ignore", message=_SCHEMA_WARNING, category=UserWarning)
+
+
+class CLIError(Exception):
+    """A bad command line or config: printed as one ``error: ...`` line, exit code 2."""
+
+
+# --- envs ----------------------------------------------------------------------------------
 
 _COLUMNS = ("id", "agents", "clocks", "description", "data source")
 _WRAP = {"agents": 34, "description": 44, "data source": 30}
@@ -53,24 +174,37 @@ def format_env_table(specs: Sequence[EnvSpec]) -> str:
     return "\n".join(out)
 
 
-def _cmd_envs(args: argparse.Namespace) -> int:
+def _cmd_envs(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog=f"{PROG} envs",
+        description="List the registered environments: id, agents, clocks (agent kind -> "
+        "period in 1 ms subframes), description and data source.",
+    )
+    parser.add_argument("--json", action="store_true", help="print the specs as JSON")
+    args = parser.parse_args(argv)
     specs = [spec(env_id) for env_id in list_envs()]
-    if args.json:
-        payload = [
-            {
-                **{k: v for k, v in _row(s).items() if k != "clocks"},
-                "clocks": s.clocks,
-                "kwargs": s.kwargs,
-                "entry_point": s.entry_point
-                if isinstance(s.entry_point, str)
-                else f"{s.entry_point.__module__}:{s.entry_point.__qualname__}",
-            }
-            for s in specs
-        ]
-        print(json.dumps(payload, indent=2, default=repr))
-    else:
-        print(format_env_table(specs))
+    try:
+        if args.json:
+            payload = [
+                {
+                    **{k: v for k, v in _row(s).items() if k != "clocks"},
+                    "clocks": s.clocks,
+                    "kwargs": s.kwargs,
+                    "entry_point": s.entry_point
+                    if isinstance(s.entry_point, str)
+                    else f"{s.entry_point.__module__}:{s.entry_point.__qualname__}",
+                }
+                for s in specs
+            ]
+            print(json.dumps(payload, indent=2, default=repr))
+        else:
+            print(format_env_table(specs))
+    except BrokenPipeError:  # e.g. `vdtn-marl envs | head`
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
     return 0
+
+
+# --- rollout -------------------------------------------------------------------------------
 
 
 def _cmd_rollout(rest: list[str]) -> int:
@@ -79,45 +213,774 @@ def _cmd_rollout(rest: list[str]) -> int:
     except ModuleNotFoundError as exc:
         if exc.name != "vdtn_marl.rollout":
             raise
-        print("vdtn-marl: the rollout module (vdtn_marl.rollout) is not available", file=sys.stderr)
+        print(f"{PROG}: the rollout module (vdtn_marl.rollout) is not available", file=sys.stderr)
         return 1
     rc = rollout.main(rest)
     return rc if isinstance(rc, int) else 0
 
 
-def build_parser() -> argparse.ArgumentParser:
+# --- help ----------------------------------------------------------------------------------
+
+
+def _conf_root() -> Any:
+    return resources.files(CONFIG_PACKAGE)
+
+
+def group_options(group: str) -> list[str]:
+    """Names of the configs of ``group`` shipped in conf/ (e.g. ``scenario`` -> platoon4, ...)."""
+    folder = _conf_root()
+    for part in group.split("/"):
+        folder = folder / part
+    if not folder.is_dir():
+        return []
+    return sorted(p.name[: -len(".yaml")] for p in folder.iterdir() if p.name.endswith(".yaml"))
+
+
+def _read_conf_yaml(*parts: str) -> dict:
+    import yaml
+
+    node = _conf_root()
+    for part in parts:
+        node = node / part
+    try:
+        return yaml.safe_load(node.read_text(encoding="utf-8")) or {}
+    except (FileNotFoundError, yaml.YAMLError):
+        return {}
+
+
+def _default_choices(config_name: str) -> dict[str, str]:
+    choices = {}
+    for item in _read_conf_yaml(f"{config_name}.yaml").get("defaults", []):
+        if isinstance(item, dict):
+            choices.update({str(k): str(v) for k, v in item.items()})
+    return choices
+
+
+def _default_value(key: str) -> Any:
+    """Default of ``key`` as shipped in conf/ (group defaults, then config.yaml), for help."""
+    choices = _default_choices("config")
+    group, _, rest = key.partition(".")
+    sources = []
+    if rest and group in choices:
+        sources.append((_read_conf_yaml("experiment", f"{choices['experiment']}.yaml"), key))
+        sources.append((_read_conf_yaml(group, f"{choices[group]}.yaml"), rest))
+    else:
+        sources.append((_read_conf_yaml("config.yaml"), key))
+    for data, path in sources:
+        node: Any = data
+        for part in path.split("."):
+            node = node.get(part, KeyError) if isinstance(node, dict) else KeyError
+        if node is not KeyError:
+            return node
+    return "?"
+
+
+def _fmt_default(value: Any) -> str:
+    if value is None:
+        return "null"
+    return str(value).lower() if isinstance(value, bool) else str(value)
+
+
+def top_help() -> str:
+    lines = [
+        f"usage: {PROG} [-m] COMMAND [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]",
+        f"       {PROG} COMMAND --help | {PROG} --version",
+        "",
+        "Multi-agent RL benchmark: platoon control and C-V2X radio resource allocation in a",
+        "Vehicular Digital Twin Network. Configs are Hydra configs (shipped in vdtn_marl/conf).",
+        "",
+        "commands:",
+        *(f"  {name:<9} {text}" for name, text in COMMANDS.items()),
+        "",
+        "config groups (GROUP=OPTION picks one; * marks the default):",
+        *_group_lines("config"),
+        "",
+        "overrides:",
+        "  KEY=VALUE      set any key: rra.kappa1=0.7 seed=3 device=cuda algo.num_envs=32",
+        "  -m, --multirun one job per combination: -m jocc rra.kappa1=0,0.5,1 seed=0,1",
+        "  hydra/launcher=basic|joblib|submitit_slurm|ray   where the jobs of a sweep run",
+        "  hydra.run.dir=DIR / hydra.sweep.dir=DIR          where outputs go",
+        "",
+        "hydra flags:",
+        "  --cfg job      print the composed config and exit (--cfg hydra, --cfg all, --resolve)",
+        "  --info         Hydra's view: config search path, defaults tree, plugins",
+        "  --hydra-help   Hydra's own help",
+        "",
+        "examples:",
+        "  vdtn-marl envs",
+        "  vdtn-marl jocc experiment=smoke",
+        "  vdtn-marl train algo=mappo scenario=platoon4 experiment=smoke",
+        "  vdtn-marl -m jocc rra.kappa1=0,0.5,1 seed=0,1 hydra/launcher=joblib",
+        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
+        "",
+        f"Run `{PROG} COMMAND --help` for a command's keys and examples. A bad config prints one",
+        "line `error: KEY=VALUE ...` and exits with code 2 before anything is written.",
+    ]
+    return "\n".join(lines)
+
+
+def _group_lines(config_name: str) -> list[str]:
+    defaults = _default_choices(config_name)
+    groups = GROUPS if config_name == "config" else {"benchmark": "scenarios × methods × seeds"}
+    out = []
+    for group, text in groups.items():
+        options = [f"{o}*" if o == defaults.get(group) else o for o in group_options(group)]
+        out.append(f"  {group:<11} {text}")
+        out.append(f"  {'':<11}   {', '.join(options)}")
+    return out
+
+
+def command_help(command: str) -> str:
+    if command == "bench":
+        return bench_help()
+    keys = COMMON_KEYS[command]
+    width = max(len(k) for k, _ in keys) + 2
+    lines = [
+        f"usage: {PROG} [-m] {command} [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]",
+        "",
+        f"{COMMANDS[command]}.",
+        _COMMAND_DETAILS[command],
+        "",
+        "config groups (GROUP=OPTION picks one; * marks the default):",
+        *_group_lines("config"),
+        "",
+        "most used keys (default):",
+        *(
+            f"  {k + '=':<{width}} {text} [default: {_fmt_default(_default_value(k))}]"
+            for k, text in keys
+        ),
+        "  Every key of `--cfg job` can be set; an unknown key or a wrong type is an error.",
+        "",
+        "sweeps and launchers:",
+        f"  {'-m ' + command + ' KEY=A,B,C ...':<33} one job per combination (basic: in turn)",
+        "  hydra/launcher=joblib             jobs in parallel processes on this machine",
+        "  hydra/launcher=submitit_slurm     jobs on SLURM (pip install 'vdtn-marl[slurm]')",
+        "  hydra/launcher=ray                jobs on a Ray cluster (see the README)",
+        "",
+        "outputs: outputs/<command>/<date_time>/ (one run) or multirun/<command>/<date_time>/<n>/",
+        "  config.yaml (resolved config), metrics.csv, checkpoints/, summary.json, .hydra/",
+        "",
+        "hydra flags: --cfg job | --cfg hydra | --info | --hydra-help",
+        "",
+        "examples:",
+        *(f"  {e}" for e in EXAMPLES[command]),
+    ]
+    return "\n".join(lines)
+
+
+_COMMAND_DETAILS = {
+    "jocc": "Iteration 0 trains control with a random RRA policy; each iteration trains π*\n"
+    "(perfect observation) and π̃ (impaired), then the RRA agents with the reward of `rra`,\n"
+    "and records per-iteration metrics (docs/model.md §5).",
+    "train": "Trains the group named by `task` with `algo` (MAPPO/IPPO) on `scenario`.",
+    "eval": "Evaluates the policies of `checkpoint` (learned groups; non-learned `control`/`rra`\n"
+    "options by name) for experiment.eval_episodes episodes and writes summary.json.",
+}
+
+
+def bench_help() -> str:
+    lines = [
+        f"usage: {PROG} bench summarize SWEEP_DIR [--csv PATH] [--plot PATH]",
+        f"       {PROG} bench [benchmark=NAME] [KEY=VALUE ...] [--cfg job]",
+        "",
+        "bench summarize: collect every job of a finished sweep (its summary.json, config.yaml",
+        "and .hydra/overrides.yaml) into one table, printed and written as SWEEP_DIR/summary.csv,",
+        "and plot control cost against V2I throughput per link (Mbps) coloured by κ1, with the",
+        "Pareto front, as SWEEP_DIR/pareto_kappa1.png.",
+        "",
+        "bench benchmark=NAME: a benchmark is scenarios × methods × seeds (conf/benchmark/).",
+        "`--cfg job` shows it; the leaderboard runner that executes it is not available yet.",
+        "",
+        "config groups (* marks the default):",
+        *_group_lines("bench"),
+        "",
+        "examples:",
+        "  vdtn-marl -m jocc rra.kappa1=0,0.5,1 seed=0,1 experiment=smoke hydra/launcher=joblib",
+        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
+        "  vdtn-marl bench benchmark=leaderboard --cfg job",
+    ]
+    return "\n".join(lines)
+
+
+# --- bench summarize -----------------------------------------------------------------------
+
+
+def _cmd_summarize(argv: list[str]) -> int:
+    from vdtn_marl import results
+
     parser = argparse.ArgumentParser(
-        prog="vdtn-marl",
-        description="Vehicular Digital Twin Network multi-agent RL benchmark.",
+        prog=f"{PROG} bench summarize",
+        description="Collect every job of a sweep into one table (CSV) and the κ1 Pareto plot.",
     )
-    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    envs = sub.add_parser("envs", help="list the registered environments")
-    envs.add_argument("--json", action="store_true", help="print the specs as JSON")
-    sub.add_parser(
-        "rollout",
-        help="run a rollout (all further arguments go to vdtn_marl.rollout)",
-        add_help=False,
+    parser.add_argument("sweep_dir", help="a multirun directory (or any folder of run dirs)")
+    parser.add_argument("--csv", help="table path (default: SWEEP_DIR/summary.csv)")
+    parser.add_argument("--plot", help="plot path (default: SWEEP_DIR/pareto_kappa1.png)")
+    parser.add_argument("--x", default=results.CONTROL_COST, help="summary key on the x axis")
+    parser.add_argument("--y", default=results.V2I_THROUGHPUT, help="summary key on the y axis")
+    args = parser.parse_args(argv)
+    if not Path(args.sweep_dir).is_dir():
+        print(f"error: {args.sweep_dir} is not a directory", file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    try:
+        summary = results.summarize_sweep(args.sweep_dir, args.csv, args.plot, args.x, args.y)
+    except FileNotFoundError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 1
+    results.print_table(summary.table, title=f"{len(summary.table)} job(s) in {args.sweep_dir}")
+    for note in summary.notes:
+        print(f"warning: {note}", file=sys.stderr)
+    print(f"table: {summary.csv_path}")
+    if summary.plot_path is not None:
+        print(f"plot:  {summary.plot_path}")
+    return 0
+
+
+# --- argument handling ---------------------------------------------------------------------
+
+
+def split_command(argv: Sequence[str]) -> tuple[str | None, list[str]]:
+    """Find the command word (the first bare word not a flag's value); return it and the rest."""
+    skip = False
+    for i, arg in enumerate(argv):
+        if skip:
+            skip = False
+            continue
+        if arg in _VALUE_FLAGS:
+            skip = True
+        elif arg in ("--info", "-i"):
+            skip = i + 1 < len(argv) and argv[i + 1] in _INFO_CHOICES
+        elif not arg.startswith("-") and "=" not in arg:
+            return arg, [*argv[:i], *argv[i + 1 :]]
+    return None, list(argv)
+
+
+def _usage_error(message: str) -> None:
+    print(f"usage: {PROG} [-m] COMMAND [OVERRIDES...]   ({PROG} --help)", file=sys.stderr)
+    print(f"{PROG}: error: {message}", file=sys.stderr)
+    raise SystemExit(EXIT_CONFIG_ERROR)
+
+
+def _hydra_args(argv: list[str]) -> argparse.Namespace:
+    from hydra._internal.utils import get_args_parser
+
+    parser = get_args_parser()
+    parser.prog = PROG
+    # Intermixed: flags may stand between overrides (`jocc a=1 --cfg job b=2`).
+    return parser.parse_intermixed_args(argv)
+
+
+def _flag_args(argv: list[str], overrides: list[str]) -> list[str]:
+    """``argv`` without the overrides (the positionals Hydra's parser collected), in order."""
+    rest, pending = [], list(overrides)
+    for arg in argv:
+        if pending and arg == pending[0]:
+            pending.pop(0)
+        else:
+            rest.append(arg)
+    return rest
+
+
+# --- pre-pass: compose and validate every job before Hydra writes anything ------------------
+
+
+def _one_line(text: str) -> str:
+    return re.sub(r"\s+", " ", str(text)).strip()
+
+
+def _override_values(overrides: Sequence[str]) -> dict[str, str]:
+    values = {}
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if sep:
+            values[key.lstrip("+~")] = value
+    return values
+
+
+def _schema_field(root: type, path: str) -> tuple[type | None, str | None]:
+    """(dataclass holding the last key of ``path``, the key's type as text) or (None, None)."""
+    import typing
+
+    cls: Any = root
+    parts = path.split(".")
+    for i, part in enumerate(parts):
+        if not dataclasses.is_dataclass(cls):
+            return None, None
+        hints = typing.get_type_hints(cls)
+        if part not in hints:
+            return cls, None
+        hint = hints[part]
+        if i == len(parts) - 1:
+            name = hint.__name__ if isinstance(hint, type) else str(hint).replace("typing.", "")
+            return cls, name
+        cls = hint
+    return None, None
+
+
+def _schema_root(config_name: str) -> type:
+    from vdtn_marl import config
+
+    return config.RunConfig if config_name == "config" else config.BenchConfig
+
+
+def _translate(exc: BaseException, config_name: str, overrides: Sequence[str]) -> str:
+    """One line for a composition or validation error, naming key, value and what is allowed."""
+    from hydra.errors import MissingConfigException, OverrideParseException
+    from omegaconf.errors import ConfigKeyError, OmegaConfBaseException, ValidationError
+
+    from vdtn_marl.config import ConfigError
+
+    values = _override_values(overrides)
+    if isinstance(exc, ConfigError):
+        match = re.match(r"unknown key '([\w.]+)'; known: (.*)", str(exc))
+        if match:  # from_dict: a key added with +KEY=VALUE
+            key = match.group(1)
+            where = key.rpartition(".")[0] or "the root config"
+            return (
+                f"{key}={values.get(key, '?')} is not a known key; allowed keys of {where}: "
+                f"{match.group(2)}"
+            )
+        return _scenario_key(str(exc), values)
+    if isinstance(exc, OverrideParseException):
+        return (
+            f"{exc.override} cannot be parsed ({_one_line(exc.message).split(' See ')[0]}); "
+            "allowed: KEY=VALUE, GROUP=OPTION, +KEY=VALUE, ~KEY, and for -m sweeps KEY=A,B,C "
+            "(https://hydra.cc/docs/advanced/override_grammar/basic/)"
+        )
+    if isinstance(exc, MissingConfigException):
+        missing = exc.missing_cfg_file or ""
+        group, _, option = missing.rpartition("/")
+        if group and exc.options is not None:
+            return (
+                f"{group}={option} is not a config of group {group!r}; allowed: "
+                f"{', '.join(exc.options)}"
+            )
+        return _one_line(exc)
+    cause: BaseException | None = exc
+    while cause is not None and not isinstance(cause, OmegaConfBaseException):
+        cause = cause.__cause__ or cause.__context__
+    if isinstance(cause, OmegaConfBaseException):
+        key = getattr(cause, "full_key", None) or ""
+        value = values.get(key, getattr(cause, "value", None))
+        parent, type_text = _schema_field(_schema_root(config_name), key) if key else (None, None)
+        if isinstance(cause, ValidationError) and type_text:
+            return f"{key}={value} has the wrong type; allowed: a value of type {type_text}"
+        if isinstance(cause, ConfigKeyError | AttributeError) or "not in struct" in str(cause):
+            if parent is not None and type_text is None:
+                known = ", ".join(f.name for f in dataclasses.fields(parent))
+                where = key.rpartition(".")[0] or "the root config"
+                return f"{key}={value} is not a known key; allowed keys of {where}: {known}"
+            if key.startswith("scenario.model."):
+                return (
+                    f"{key}={value} is not set by default; add a model parameter with a "
+                    f"leading +: +{key}={value}; allowed: {', '.join(_model_parameters())}"
+                )
+            return f"{key}={value} is not in the config; add a new key with +{key}={value}"
+        first = str(cause).splitlines()[0]
+        return f"{key}={value}: {first}" if key else _one_line(first)
+    message = _one_line(exc)
+    match = re.search(r"Ambiguous value for argument '([^']+)'", message)
+    if match:
+        return (
+            f"{match.group(1)} is a sweep; allowed without -m: one value per key (add -m, "
+            "--multirun, to run one job per value)"
+        )
+    return message
+
+
+def _model_parameters() -> list[str]:
+    """Keys allowed under ``scenario.model`` (TwinParams keys the scenario does not set)."""
+    from vdtn_marl.sim.params import PlatoonParams, RadioParams
+
+    names = {f.name for cls in (PlatoonParams, RadioParams) for f in dataclasses.fields(cls)}
+    return sorted(names - set(_SCENARIO_KEYS))
+
+
+_SCENARIO_KEYS = (
+    "num_vehicles",
+    "num_subchannels",
+    "subchannel_bandwidth_hz",
+    "cam_size_bits",
+    "episode_intervals",
+)
+
+
+def _scenario_key(message: str, values: dict[str, str]) -> str:
+    """The simulator's own errors name bare model keys; give them their config path."""
+    match = re.match(r"(\w+)=", message)
+    if match and match.group(1) in _SCENARIO_KEYS:
+        return f"scenario.{message}"
+    if match and match.group(1) in _model_parameters():
+        return f"scenario.model.{message}"
+    match = re.match(r"unknown model parameter '(\w+)'", message)
+    if match:
+        key = f"scenario.model.{match.group(1)}"
+        return (
+            f"{key}={values.get(key, '?')} is not a model parameter; allowed: "
+            f"{', '.join(_model_parameters())}"
+        )
+    return message
+
+
+def _job_overrides(overrides: list[str], multirun: bool) -> list[list[str]]:
+    """The overrides of every job: a sweep is expanded as Hydra's basic sweeper does."""
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
+    parsed = parser.parse_overrides(overrides)
+    if not multirun or not any(o.is_sweep_override() for o in parsed):
+        return [overrides]
+    sweeper = _choice_of(overrides, "hydra/sweeper")
+    if sweeper not in (None, "basic"):
+        # Another sweeper chooses values itself: check the config with its sweeps left out.
+        return [[o.input_line for o in parsed if not o.is_sweep_override()]]
+    return BasicSweeper.split_arguments(parsed, None)[0]
+
+
+def _choice_of(overrides: Sequence[str], group: str) -> str | None:
+    for item in overrides:
+        if item.startswith(f"{group}="):
+            return item.split("=", 1)[1]
+    return None
+
+
+_LAUNCHER_PLUGINS = {
+    "hydra_plugins.hydra_joblib_launcher": "hydra-joblib-launcher (pip install vdtn-marl)",
+    "hydra_plugins.hydra_submitit_launcher": "pip install 'vdtn-marl[slurm]'",
+    "hydra_plugins.hydra_ray_launcher": "see the README, section Command line > Ray",
+}
+
+
+def _check_launcher(hydra_cfg: Any) -> None:
+    target = str(hydra_cfg.launcher.get("_target_", ""))
+    module = target.rpartition(".")[0]
+    package = ".".join(module.split(".")[:2])
+    try:
+        found = importlib.util.find_spec(package) is not None
+    except (ImportError, ValueError):
+        found = False
+    if not found:
+        choice = hydra_cfg.runtime.choices.get("hydra/launcher")
+        hint = _LAUNCHER_PLUGINS.get(package, f"install the package that provides {target}")
+        usable = ["basic"]
+        if importlib.util.find_spec("hydra_plugins.hydra_joblib_launcher"):
+            usable.append("joblib")
+        raise CLIError(
+            f"hydra/launcher={choice} needs the plugin {package}, which is not installed; "
+            f"{hint}; allowed here: {', '.join(usable)}"
+        )
+
+
+def _compose(config_name: str, overrides: list[str]) -> Any:
+    from hydra import compose
+
+    return compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
+
+
+def _job_config(cfg: Any) -> dict:
+    """The composed config as plain data, without the ``hydra`` node."""
+    from omegaconf import OmegaConf, open_dict
+
+    if "hydra" in cfg:
+        cfg = cfg.copy()
+        with open_dict(cfg):
+            del cfg["hydra"]
+    return OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
+
+
+def to_run_config(data: dict, command: str = "jocc") -> Any:
+    """Composed job config (plain data) -> validated :class:`RunConfig`: ranges, the device,
+    and the checkpoint (required by ``eval``; a run directory stands for its last checkpoint,
+    and ``data["checkpoint"]`` is updated to the file)."""
+    from vdtn_marl import config
+
+    data["checkpoint"] = _checkpoint_file(data.get("checkpoint"), required=command == "eval")
+    run_cfg = config.validate(config.from_dict(data))
+    config.validate_device(run_cfg.device)
+    if run_cfg.checkpoint is not None:
+        from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
+
+        try:
+            load_checkpoint(run_cfg.checkpoint, config.to_dict(run_cfg))
+        except CheckpointError as exc:
+            raise config.ConfigError(
+                f"checkpoint={run_cfg.checkpoint} cannot be used: {exc}; allowed: a checkpoint "
+                "written with the same scenario and network shapes"
+            ) from exc
+    return run_cfg
+
+
+def _checkpoint_file(value: Any, required: bool) -> Any:
+    from vdtn_marl.config import ConfigError
+    from vdtn_marl.runs import CHECKPOINT_DIR
+
+    if value is None:
+        if required:
+            raise ConfigError(
+                "checkpoint=None: eval needs the policies to evaluate; allowed: a run directory "
+                f"(its {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
+            )
+        return None
+    path = Path(str(value))
+    if path.is_dir() and (path / CHECKPOINT_DIR / "last.pt").is_file():
+        return str(path / CHECKPOINT_DIR / "last.pt")
+    if not path.is_file():
+        raise ConfigError(
+            f"checkpoint={value} does not exist; allowed: a run directory (its "
+            f"{CHECKPOINT_DIR}/last.pt) or a checkpoint file"
+        )
+    return str(path)
+
+
+def _validate_bench(data: dict, check_runs: bool = True) -> None:
+    from vdtn_marl import config
+
+    bench_cfg = config.BenchConfig(
+        benchmark=config.BenchmarkConfig(**data["benchmark"]),
+        device=data["device"],
+        progress=data["progress"],
     )
-    return parser
+    config.validate_benchmark(bench_cfg)
+    config.validate_device(bench_cfg.device)
+    b = bench_cfg.benchmark
+    _require_option("benchmark.experiment", b.experiment, "experiment")
+    for scenario in b.scenarios:
+        _require_option("benchmark.scenarios", scenario, "scenario")
+    if not check_runs:
+        return
+    # Every scenario × method must compose into a valid run (seeds only change `seed`).
+    for scenario in b.scenarios:
+        for method, method_overrides in b.methods.items():
+            overrides = [
+                f"scenario={scenario}",
+                f"experiment={b.experiment}",
+                f"device={bench_cfg.device}",
+                *method_overrides,
+            ]
+            try:
+                to_run_config(_job_config(_compose("config", overrides)))
+            except Exception as exc:
+                raise CLIError(
+                    f"benchmark.methods.{method}={list(method_overrides)} on scenario "
+                    f"{scenario}: {_translate(exc, 'config', overrides)}"
+                ) from exc
+
+
+def _require_option(key: str, value: str, group: str) -> None:
+    options = group_options(group)
+    if value not in options:
+        raise CLIError(f"{key}={value} is not a config of group {group!r}; allowed: "
+                       f"{', '.join(options)}")  # fmt: skip
+
+
+def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
+    """resume=true: the run directory must hold a run whose config matches this one."""
+    import yaml
+
+    from vdtn_marl.results import flatten
+    from vdtn_marl.runs import CONFIG_FILE
+
+    run_dir = Path(str(hydra_cfg.run.dir))
+    old_file = run_dir / CONFIG_FILE
+    if not old_file.is_file():
+        raise CLIError(
+            f"resume=true but hydra.run.dir={run_dir} holds no run ({CONFIG_FILE} is missing); "
+            "allowed: hydra.run.dir=<the directory of the run to continue>"
+        )
+    with open(old_file, encoding="utf-8") as handle:
+        old = flatten(yaml.safe_load(handle) or {})
+    new = flatten(data)
+    free = {"resume", "progress", "device"}
+    # Keys the old run does not have (added to the schema since) are not compared.
+    for key in sorted(set(old) & set(new)):
+        if key not in free and old[key] != new[key]:
+            raise CLIError(
+                f"resume=true but {key}={new.get(key)!r} differs from the run's "
+                f"{old_file} ({key}={old.get(key)!r}); allowed: the run's own value"
+            )
+
+
+def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -> None:
+    """Compose and validate every job of the command line; raise :class:`CLIError`."""
+    from hydra import initialize_config_module
+
+    from vdtn_marl.config import register_configs
+
+    config_name = HYDRA_COMMANDS[command]
+    warnings.filterwarnings("ignore", message=_SCHEMA_WARNING, category=UserWarning)
+    register_configs()
+    with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
+        try:
+            jobs = _job_overrides(overrides, bool(hargs.multirun))
+        except Exception as exc:
+            raise CLIError(_translate(exc, config_name, overrides)) from exc
+        for index, job in enumerate(jobs):
+            shown = " ".join(o for o in job if not o.startswith(("hydra.", "hydra/")))
+            where = f" (sweep job {index}: {shown})" if len(jobs) > 1 else ""
+            try:
+                cfg = _compose(config_name, job)
+            except Exception as exc:
+                raise CLIError(f"{_translate(exc, config_name, job)}{where}") from exc
+            if index == 0 and hargs.multirun:
+                _check_launcher(cfg.hydra)
+            try:
+                data = _job_config(cfg)
+                if config_name == "bench":
+                    _validate_bench(data, check_runs=not hargs.cfg)
+                else:
+                    run_cfg = to_run_config(data, command)
+                    if run_cfg.resume and not hargs.multirun and not hargs.cfg:
+                        _check_resume(run_cfg, data, cfg.hydra)
+            except CLIError as exc:
+                raise CLIError(f"{exc}{where}") from exc
+            except Exception as exc:
+                raise CLIError(f"{_translate(exc, config_name, job)}{where}") from exc
+
+
+# --- the Hydra jobs --------------------------------------------------------------------------
+
+
+def run_job(command: str, cfg: Any) -> dict:
+    """One job inside Hydra: validate, write config.yaml, call the entry point, print results."""
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+    from omegaconf import OmegaConf
+
+    from vdtn_marl import results
+    from vdtn_marl.algos import api
+    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text
+
+    data = _job_config(cfg)
+    run_cfg = to_run_config(data, command)
+    run_dir = Path(HydraConfig.get().runtime.output_dir)
+    atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
+    entry: Callable[..., dict] = {"train": api.train, "jocc": api.jocc, "eval": api.evaluate}[
+        command
+    ]
+    summary = entry(run_cfg, run_dir)
+    if HydraConfig.get().mode == RunMode.MULTIRUN:
+        print(f"job {HydraConfig.get().job.num} done: {run_dir}")
+        return summary
+    if isinstance(summary, dict) and summary:
+        results.print_summary(summary, title=f"{command} summary")
+    print(f"run directory: {run_dir}")
+    plots = sorted(str(p) for p in run_dir.rglob("*.png"))
+    if plots:
+        print("plots: " + ", ".join(plots))
+    return summary
+
+
+class SweepSummaryHint(Callback):
+    """Hydra callback (conf/config.yaml): after a sweep, say how to table its results."""
+
+    def on_multirun_end(self, config: Any, **kwargs: Any) -> None:
+        sweep_dir = config.hydra.sweep.dir
+        print(f"sweep done: {sweep_dir}")
+        print(f"table and κ1 Pareto plot: {PROG} bench summarize {sweep_dir}")
+
+
+def _train_job(cfg: Any) -> dict:
+    return run_job("train", cfg)
+
+
+def _jocc_job(cfg: Any) -> dict:
+    return run_job("jocc", cfg)
+
+
+def _eval_job(cfg: Any) -> dict:
+    return run_job("eval", cfg)
+
+
+def _bench_job(cfg: Any) -> None:  # reached only with --cfg/--info, see _cmd_hydra
+    raise NotImplementedError("the leaderboard runner is not available yet")
+
+
+_JOBS = {"train": _train_job, "jocc": _jocc_job, "eval": _eval_job, "bench": _bench_job}
+
+
+def _launch(command: str, hydra_argv: list[str]) -> int:
+    """Run the ``@hydra.main`` app of ``command`` with ``hydra_argv`` as its command line."""
+    import hydra
+
+    from vdtn_marl.config import register_configs
+
+    register_configs()
+    app = hydra.main(
+        config_path=f"pkg://{CONFIG_PACKAGE}",
+        config_name=HYDRA_COMMANDS[command],
+        version_base="1.3",
+    )(_JOBS[command])
+    saved = sys.argv
+    sys.argv = [PROG, *hydra_argv]
+    try:
+        app()
+    finally:
+        sys.argv = saved
+    return 0
+
+
+def _cmd_hydra(command: str, argv: list[str]) -> int:
+    if command == "bench" and argv and argv[0] == "summarize":
+        return _cmd_summarize(argv[1:])
+    if any(a in ("-h", "--help") for a in argv):
+        print(command_help(command))
+        return 0
+    hargs = _hydra_args(argv)
+    if hargs.config_name or hargs.config_path:
+        _usage_error("--config-name/--config-path are not supported; the command word picks "
+                     "the config (use --config-dir DIR to add your own config files)")  # fmt: skip
+    modes = [hargs.run, hargs.multirun, hargs.cfg, hargs.info, hargs.shell_completion]
+    if sum(bool(m) for m in modes) > 1:
+        _usage_error("only one of --run, -m/--multirun, --cfg, --info, --shell-completion")
+    overrides = [*hargs.overrides, f"hydra.job.name={command}"]
+    # Flags first, then the overrides: the order Hydra's own parser accepts.
+    hydra_argv = [*_flag_args(argv, list(hargs.overrides)), *overrides]
+    if hargs.config_dir:
+        # --config-dir for the pre-pass, which composes through the compose API.
+        searchpath = f"hydra.searchpath=[file://{Path(hargs.config_dir).resolve()}]"
+        overrides.append(searchpath)
+    passthrough = (
+        hargs.hydra_help or hargs.info or hargs.shell_completion or hargs.experimental_rerun
+    )
+    if not passthrough:
+        try:
+            prevalidate(command, hargs, overrides)
+        except CLIError as exc:
+            print(f"error: {exc}", file=sys.stderr)
+            return EXIT_CONFIG_ERROR
+        if command == "bench" and not hargs.cfg:
+            print(
+                "error: the leaderboard runner (`vdtn-marl bench benchmark=NAME`) is not "
+                "available yet; allowed now: `vdtn-marl bench summarize SWEEP_DIR` and "
+                "`vdtn-marl bench --cfg job`",
+                file=sys.stderr,
+            )
+            return 1
+    return _launch(command, hydra_argv)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    args_list = list(sys.argv[1:] if argv is None else argv)
-    # `rollout` forwards everything after it untouched (including --help and its own options).
-    if args_list and args_list[0] == "rollout":
-        return _cmd_rollout(args_list[1:])
-    parser = build_parser()
-    args = parser.parse_args(args_list)
-    if args.command == "envs":
-        try:
-            return _cmd_envs(args)
-        except BrokenPipeError:  # e.g. `vdtn-marl envs | head`
-            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
-            return 0
-    parser.print_usage(sys.stderr)
-    parser.exit(2, f"{parser.prog}: error: a command is required (envs, rollout)\n")
-    return 2  # unreachable
+    args = list(sys.argv[1:] if argv is None else argv)
+    warnings.filterwarnings("ignore", message=_SCHEMA_WARNING, category=UserWarning)
+    if args and args[0] == "rollout":  # forwards everything after it untouched
+        return _cmd_rollout(args[1:])
+    if args and args[0] == "--version":
+        print(f"{PROG} {__version__}")
+        return 0
+    if args and args[0] in ("-h", "--help"):
+        print(top_help())
+        return 0
+    command, rest = split_command(args)
+    if command is None:
+        _usage_error(f"a command is required ({', '.join(COMMANDS)})")
+    if command not in COMMANDS:
+        _usage_error(f"unknown command {command!r}; choose one of {', '.join(COMMANDS)}")
+    if command == "envs":
+        return _cmd_envs(rest)
+    if command == "rollout":
+        return _cmd_rollout(rest)
+    return _cmd_hydra(command, rest)
 
 
 if __name__ == "__main__":

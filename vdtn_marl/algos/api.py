@@ -47,7 +47,7 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
     loop.load_policies(payload)
     loop.position["iteration"] = int(payload["position"]["iteration"])
     row = loop.evaluate()
-    summary = loop.summary(row["seconds"], resumed=False)
+    summary = loop.summary(row["eval_seconds"], resumed=False)
     summary["checkpoint"] = str(Path(cfg.checkpoint).resolve())
     summary["task"] = "eval"
     atomic_write_json(Path(run_dir) / SUMMARY_FILE, summary)

@@ -321,7 +321,7 @@ class JointOptimisation:
                 ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
             )  # fmt: skip
             self._last_results = (optimal, acting)
-        row["seconds"] = time.perf_counter() - began
+        row["eval_seconds"] = time.perf_counter() - began
         self.eval_log.log(row)
         self.last_evaluation = row
         return row

@@ -1,0 +1,368 @@
+"""Tables and plots of run results: one table for a sweep, the κ1 Pareto front.
+
+``vdtn-marl bench summarize SWEEP_DIR`` calls :func:`summarize_sweep`: it finds every job of a
+Hydra sweep (a directory with ``.hydra/`` or ``summary.json``), reads the job's ``summary.json``
+and its configuration (``config.yaml`` written by the CLI, else ``.hydra/config.yaml``, plus
+``.hydra/overrides.yaml``), and writes one CSV row per job and a PNG of control cost against
+V2I throughput per link, coloured by κ1, with the Pareto front of the κ1 sweep.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import sys
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from vdtn_marl.runs import (
+    CONFIG_FILE,
+    SUMMARY_FILE,
+    atomic_write_bytes,
+    atomic_write_text,
+    read_json,
+)
+
+CONTROL_COST = "control_cost"
+V2I_THROUGHPUT = "v2i_throughput_mbps_per_link"
+TABLE_FILE = "summary.csv"
+PARETO_FILE = "pareto_kappa1.png"
+
+# Configuration keys copied into the table (when the job's config has them).
+CONFIG_COLUMNS = (
+    "scenario.name",
+    "algo.name",
+    "control.name",
+    "rra.name",
+    "rra.kappa1",
+    "rra.kappa2",
+    "experiment.name",
+    "seed",
+)
+# Summary keys printed by `bench summarize`, in this order, when present (the CSV has all).
+TABLE_METRICS = (
+    CONTROL_COST,
+    V2I_THROUGHPUT,
+    "cam_delivery_rate",
+    "cam_latency_ms_mean",
+    "gap_error_abs_m",
+    "evoi",
+)
+# Short headers of the printed table (the CSV keeps the full keys).
+SHORT_NAMES = {
+    "rra.kappa1": "κ1",
+    "rra.kappa2": "κ2",
+    "scenario.name": "scenario",
+    "algo.name": "algo",
+    "control.name": "control",
+    "rra.name": "rra",
+    "experiment.name": "experiment",
+    CONTROL_COST: "control cost",
+    V2I_THROUGHPUT: "V2I Mbps/link",
+    "cam_delivery_rate": "CAM delivered",
+    "cam_latency_ms_mean": "CAM ms",
+    "gap_error_abs_m": "|gap err| m",
+    "speed_error_abs_mps": "|speed err| m/s",
+    "collision_rate": "collisions",
+    "evoi": "EVoI",
+}
+AXIS_LABELS = {
+    CONTROL_COST: "control cost (dimensionless; lower is better)",
+    V2I_THROUGHPUT: "V2I throughput per link (Mbps)",
+}
+
+
+@dataclass
+class SweepSummary:
+    """What :func:`summarize_sweep` found and wrote."""
+
+    table: Any  # pandas.DataFrame, one row per job with a summary.json
+    missing: list[str] = field(default_factory=list)  # jobs without summary.json
+    notes: list[str] = field(default_factory=list)  # warnings for the user, one line each
+    csv_path: Path | None = None
+    plot_path: Path | None = None
+
+
+def flatten(data: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """Nested mappings to ``{"a.b": value}``; lists are kept only when they hold no mapping."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten(value, f"{name}."))
+        elif isinstance(value, list | tuple):
+            if not any(isinstance(v, Mapping | list | tuple) for v in value):
+                out[name] = value
+        else:
+            out[name] = value
+    return out
+
+
+def find_jobs(root: str | Path) -> list[Path]:
+    """Job directories under ``root``: those holding ``.hydra/`` or ``summary.json``."""
+    root = Path(root)
+    jobs = {p.parent for p in root.rglob(".hydra") if p.is_dir()}
+    jobs |= {p.parent for p in root.rglob(SUMMARY_FILE) if p.is_file()}
+    # A multirun's top directory has no .hydra of its own, but guard against odd layouts:
+    # a directory is a job only if no other job lies inside it.
+    return sorted(jobs, key=lambda p: (len(p.parts), str(p)))
+
+
+def _read_yaml(path: Path) -> Any:
+    with open(path, encoding="utf-8") as handle:
+        return yaml.safe_load(handle)
+
+
+def load_job(job_dir: Path, root: Path) -> dict[str, Any]:
+    """One table row: ``run``, ``overrides``, config columns, then the summary's scalars."""
+    row: dict[str, Any] = {"run": str(job_dir.relative_to(root)) if job_dir != root else "."}
+    overrides_file = job_dir / ".hydra" / "overrides.yaml"
+    if overrides_file.is_file():
+        overrides = _read_yaml(overrides_file) or []
+        row["overrides"] = " ".join(str(o) for o in overrides)
+    summary = read_json(job_dir / SUMMARY_FILE)
+    if not isinstance(summary, Mapping):
+        raise ValueError(f"{job_dir / SUMMARY_FILE} holds a {type(summary).__name__}, not a dict")
+    config = None
+    for config_file in (job_dir / CONFIG_FILE, job_dir / ".hydra" / "config.yaml"):
+        if config_file.is_file():
+            config = _read_yaml(config_file)
+            break
+    if not isinstance(config, Mapping):
+        config = summary.get("config")  # the entry points copy the config into the summary
+    if isinstance(config, Mapping):
+        flat = flatten(config)
+        row.update({key: flat[key] for key in CONFIG_COLUMNS if key in flat})
+    if row.get("rra.kappa2") is None and isinstance(row.get("rra.kappa1"), int | float):
+        row["rra.kappa2"] = 1.0 - row["rra.kappa1"]  # κ2 defaults to 1 − κ1
+    for key, value in flatten(metrics_of(summary)).items():
+        row.setdefault(key, value)
+    return row
+
+
+def metrics_of(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """A summary without its copy of the run's config (``config``)."""
+    return {k: v for k, v in summary.items() if k != "config"}
+
+
+def metric_column(columns: Sequence[str], key: str) -> str | None:
+    """``key`` itself, else the one flattened column ending in ``.key`` (e.g. ``eval.key``)."""
+    if key in columns:
+        return key
+    matches = [c for c in columns if c.endswith(f".{key}")]
+    return matches[0] if len(matches) == 1 else None
+
+
+def pareto_mask(cost: Sequence[float], value: Sequence[float]) -> list[bool]:
+    """True for the points no other point beats: lower-or-equal cost and higher-or-equal value,
+    one of them strictly."""
+    points = list(zip(cost, value, strict=True))
+    mask = []
+    for i, (c_i, v_i) in enumerate(points):
+        dominated = any(
+            c_j <= c_i and v_j >= v_i and (c_j < c_i or v_j > v_i)
+            for j, (c_j, v_j) in enumerate(points)
+            if j != i
+        )
+        mask.append(not dominated)
+    return mask
+
+
+def _finite(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def plot_kappa1_pareto(
+    table: Any, path: str | Path, x: str = CONTROL_COST, y: str = V2I_THROUGHPUT
+) -> Path:
+    """Control cost (x) against V2I throughput per link (y), one point per job coloured by κ1;
+    the mean over seeds of each configuration is marked and the Pareto front of the means is
+    drawn. Writes a PNG atomically and returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = table[[c for c in table.columns if c in (x, y, "rra.kappa1", "seed", *CONFIG_COLUMNS)]]
+    data = data[data[x].map(_finite) & data[y].map(_finite)].copy()
+    if data.empty:
+        raise ValueError(f"no job has finite values of both {x!r} and {y!r}")
+    has_kappa = "rra.kappa1" in data.columns and data["rra.kappa1"].map(_finite).all()
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
+    if has_kappa:
+        points = ax.scatter(
+            data[x], data[y], c=data["rra.kappa1"], cmap="viridis", vmin=0.0, vmax=1.0,
+            s=22, alpha=0.55, label="job (one seed)",
+        )  # fmt: skip
+        fig.colorbar(points, ax=ax, label="κ1 (weight of V2I throughput in the RRA reward)")
+    else:
+        ax.scatter(data[x], data[y], s=22, alpha=0.55, label="job")
+
+    # Mean over seeds of every configuration that differs in more than the seed.
+    group_keys = [
+        c for c in CONFIG_COLUMNS if c in data.columns and c != "seed" and data[c].nunique() > 1
+    ]
+    if group_keys:
+        means = data.groupby(group_keys, dropna=False)[[x, y]].mean().reset_index()
+    else:
+        means = data[[x, y]].mean().to_frame().T
+    if len(data) > len(means):
+        ax.scatter(means[x], means[y], marker="D", s=40, facecolors="none", edgecolors="black",
+                   label="mean over seeds")  # fmt: skip
+    if "rra.kappa1" in means.columns:
+        for _, row in means.iterrows():
+            label = f"κ1={row['rra.kappa1']:g}"
+            ax.annotate(label, (row[x], row[y]), textcoords="offset points", xytext=(5, 4),
+                        fontsize=8)  # fmt: skip
+
+    front = means[pareto_mask(list(means[x]), list(means[y]))].sort_values(x)
+    if len(front) > 1:
+        ax.step(front[x], front[y], where="post", color="black", linestyle="--", linewidth=1,
+                label="Pareto front")  # fmt: skip
+    ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 4), useOffset=False)
+    ax.set_xlabel(AXIS_LABELS.get(x, x))
+    ax.set_ylabel(AXIS_LABELS.get(y, y))
+    ax.set_title("κ1 sweep: control cost vs V2I throughput")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    plt.close(fig)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def summarize_sweep(
+    root: str | Path,
+    csv_path: str | Path | None = None,
+    plot_path: str | Path | None = None,
+    x: str = CONTROL_COST,
+    y: str = V2I_THROUGHPUT,
+) -> SweepSummary:
+    """Collect every job under ``root`` into one table (CSV) and the κ1 Pareto plot (PNG).
+
+    Defaults: ``root/summary.csv`` and ``root/pareto_kappa1.png``. Raises ``FileNotFoundError``
+    when ``root`` is not a directory or holds no ``summary.json`` at all.
+    """
+    import pandas as pd
+
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root} is not a directory")
+    rows, missing, notes = [], [], []
+    for job in find_jobs(root):
+        if not (job / SUMMARY_FILE).is_file():
+            missing.append(str(job.relative_to(root)) if job != root else ".")
+            continue
+        try:
+            rows.append(load_job(job, root))
+        except (OSError, ValueError, yaml.YAMLError) as exc:
+            notes.append(f"skipped {job}: {type(exc).__name__}: {exc}")
+    if missing:
+        notes.append(
+            f"{len(missing)} job(s) have no {SUMMARY_FILE} (failed, still running or not "
+            f"started) and are left out: {', '.join(missing)}"
+        )
+    if not rows:
+        raise FileNotFoundError(f"no {SUMMARY_FILE} under {root}; did the sweep's jobs finish?")
+
+    table = pd.DataFrame(rows)
+    summary = SweepSummary(table=table, missing=missing, notes=notes)
+    summary.csv_path = atomic_write_text(csv_path or root / TABLE_FILE, table.to_csv(index=False))
+
+    columns = {key: metric_column(list(table.columns), key) for key in (x, y)}
+    absent = [key for key, column in columns.items() if column is None]
+    if absent:
+        notes.append(
+            f"no Pareto plot: no job's {SUMMARY_FILE} has {' or '.join(map(repr, absent))} "
+            f"(keys found: {', '.join(c for c in table.columns if c not in ('run', 'overrides'))})"
+        )
+        return summary
+    x_col, y_col = columns[x], columns[y]
+    incomplete = [
+        r for r, a, b in zip(table["run"], table[x_col], table[y_col], strict=True)
+        if not (_finite(a) and _finite(b))
+    ]  # fmt: skip
+    if incomplete:
+        notes.append(
+            f"{len(incomplete)} job(s) lack a finite {x!r} or {y!r} and are left out of the "
+            f"plot: {', '.join(incomplete)}"
+        )
+    if len(incomplete) == len(table):
+        notes.append("no Pareto plot: no job has both values")
+        return summary
+    summary.plot_path = plot_kappa1_pareto(
+        table.rename(columns={x_col: x, y_col: y}), plot_path or root / PARETO_FILE, x, y
+    )
+    return summary
+
+
+def _format_cell(value: Any) -> str:
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "-"
+    if isinstance(value, str):  # numbers read back from a CSV (a resumed run's rows)
+        try:
+            value = float(value) if value.strip().lower() not in ("nan", "inf", "-inf") else value
+        except ValueError:
+            return value
+    if isinstance(value, float):
+        return f"{value:.4g}"
+    return str(value)
+
+
+def print_table(table: Any, console: Any = None, title: str | None = None) -> None:
+    """Print ``table`` with rich: the run, the config columns that vary, the main metrics."""
+    from rich.console import Console
+    from rich.table import Table
+
+    # Piped output (logs, CI) is not cut at rich's default 80 columns.
+    console = console or Console(width=None if sys.stdout.isatty() else 160)
+    config_cols = [
+        c
+        for c in CONFIG_COLUMNS
+        if c in table.columns and (c == "rra.kappa1" or table[c].nunique(dropna=False) > 1)
+    ]
+    columns = list(table.columns)
+    metric_cols = [m for m in (metric_column(columns, k) for k in TABLE_METRICS) if m]
+    if not metric_cols:  # unknown summary layout: its first numeric columns
+        metric_cols = [
+            c
+            for c in columns
+            if c not in ("run", "overrides", *CONFIG_COLUMNS)
+            and table[c].map(lambda v: _finite(v) or v is None).all()
+            and table[c].map(_finite).any()
+        ][:8]
+    shown = ["run", *config_cols, *metric_cols]
+    cells = [[_format_cell(row.get(c)) for c in shown] for _, row in table.iterrows()]
+    rich_table = Table(title=title, show_lines=False)
+    for i, column in enumerate(shown):
+        name = SHORT_NAMES.get(column.rpartition(".")[2] if column.startswith("eval.") else column)
+        rich_table.add_column(
+            name or column.replace("_", " "),  # wraps at spaces; values are never cut
+            justify="left" if column == "run" else "right",
+            min_width=max([len(r[i]) for r in cells] + [2]),
+        )
+    for row_cells in cells:
+        rich_table.add_row(*row_cells)
+    console.print(rich_table)
+
+
+def print_summary(summary: Mapping[str, Any], console: Any = None, title: str = "summary") -> None:
+    """Print the scalar entries of one run's summary as a two-column rich table."""
+    from rich.console import Console
+    from rich.table import Table
+
+    console = console or Console()
+    rich_table = Table(title=title)
+    rich_table.add_column("metric")
+    rich_table.add_column("value", justify="right")
+    for key, value in flatten(metrics_of(summary)).items():
+        if isinstance(value, list | tuple):
+            continue
+        rich_table.add_row(key, _format_cell(value))
+    console.print(rich_table)
