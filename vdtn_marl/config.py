@@ -66,10 +66,12 @@ class AlgoConfig:
     depth: int = 2  # hidden layers
     num_cells: int = 64  # units per hidden layer
     lr: float = 3e-4
-    gamma: float = 0.99  # per step of the trained group's clock
+    gamma: float = 0.95  # vehicles: discount per control interval (horizon ≈ 1 s)
+    rra_gamma: float = 0.99  # RRA agents: discount per subframe (horizon ≈ 100 ms)
     lmbda: float = 0.95
     clip_epsilon: float = 0.2
     entropy_coef: float = 1e-3
+    initial_log_scale: float = -3.0  # log std (pre-tanh) of the initial acceleration policy
     critic_coef: float = 1.0
     max_grad_norm: float = 1.0
     epochs: int = 4  # PPO epochs per collected batch
@@ -197,6 +199,8 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive_int(f"algo.{key}", getattr(a, key))
     _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
     _real("algo.gamma", a.gamma, 0.0, 1.0)
+    _real("algo.rra_gamma", a.rra_gamma, 0.0, 1.0)
+    _real("algo.initial_log_scale", a.initial_log_scale, -10.0, 2.0)
     _real("algo.lmbda", a.lmbda, 0.0, 1.0)
     _real("algo.clip_epsilon", a.clip_epsilon, 0.0, 1.0, low_open=True)
     _real("algo.entropy_coef", a.entropy_coef, 0.0, 1e3)

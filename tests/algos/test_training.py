@@ -37,7 +37,13 @@ def test_mappo_improves_the_control_return_over_the_untrained_policy():
     torch.manual_seed(0)
     params = TwinParams.from_overrides(episode_intervals=100)
     algo = AlgoConfig(
-        num_envs=16, rollout_steps=50, epochs=10, minibatch_size=512, lr=1e-3, gamma=0.95
+        num_envs=16,
+        rollout_steps=50,
+        epochs=10,
+        minibatch_size=512,
+        lr=1e-3,
+        gamma=0.95,
+        initial_log_scale=-1.5,
     )
     env = VDTNTorchRLEnv("control", batch_size=16, seed=0, episode_intervals=100)
     trainer = PPOTrainer(env, "vehicle", algo, seed=0, prior=None)

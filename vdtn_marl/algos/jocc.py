@@ -167,7 +167,12 @@ class JointOptimisation:
             if control.name == "oracle":
                 rra_env.control_module.policy = make_control_baseline("oracle", rra_env.twin)
             self.rra = PPOTrainer(
-                rra_env, "rra", algo, seed=cfg.seed * 8 + 2, rollout_steps=algo.rra_rollout_steps
+                rra_env,
+                "rra",
+                algo,
+                seed=cfg.seed * 8 + 2,
+                rollout_steps=algo.rra_rollout_steps,
+                gamma=algo.rra_gamma,
             )
         self.position = {"iteration": 0, "stage": 0, "stage_start": None}
         self.train_log = MetricsLog(self.run_dir, tensorboard=True)

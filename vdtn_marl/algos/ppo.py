@@ -63,6 +63,7 @@ class PPOTrainer:
         prior: controller the continuous policy starts from (see
             :mod:`~vdtn_marl.algos.networks`), e.g. the linear CACC controller.
         rollout_steps: steps per scenario per batch (default ``algo.rollout_steps``).
+        gamma: discount per step of the group's clock (default ``algo.gamma``).
     """
 
     def __init__(
@@ -74,6 +75,7 @@ class PPOTrainer:
         drop_features: Sequence[int] = (),
         prior=None,
         rollout_steps: int | None = None,
+        gamma: float | None = None,
     ):
         self.env = env
         self.group = group
@@ -91,6 +93,7 @@ class PPOTrainer:
             num_cells=algo.num_cells,
             drop_features=drop_features,
             prior=prior,
+            initial_log_scale=algo.initial_log_scale,
             device=self.device,
         )
         self.critic = make_critic(
@@ -119,7 +122,8 @@ class PPOTrainer:
             done=(group, "done"),
             terminated=(group, "terminated"),
         )
-        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=algo.gamma, lmbda=algo.lmbda)
+        self.gamma = algo.gamma if gamma is None else gamma
+        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=self.gamma, lmbda=algo.lmbda)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo.lr)
         self.iteration = 0
         self.scaling_fitted = False
