@@ -61,6 +61,21 @@ class EnvSpec:
     clocks: dict[str, int] = field(default_factory=dict, hash=False)
     description: str = ""
     data_source: str = ""
+    uses_traces: bool = False
+
+    @property
+    def data_sources(self) -> dict[str, dict[str, Any]]:
+        """Trace sets selectable with the ``traces=`` kwarg, with their provenance.
+
+        ``{name: {"name", "description", "synthetic", "source", "license"}}`` for an
+        environment driven by leader traces (``uses_traces``), else ``{}``. Imports
+        :mod:`vdtn_marl.data` (and torch) on first use only.
+        """
+        if not self.uses_traces:
+            return {}
+        from vdtn_marl.data import trace_set_provenance
+
+        return trace_set_provenance()
 
     def load(self) -> Callable[..., Any]:
         """Return the entry point callable, importing it if it is a ``"module:attr"`` string."""
@@ -96,6 +111,7 @@ def register(
     clocks: dict[str, int] | None = None,
     description: str = "",
     data_source: str = "",
+    uses_traces: bool = False,
     override: bool = False,
     **defaults: Any,
 ) -> EnvSpec:
@@ -103,6 +119,8 @@ def register(
 
     Raises ``ValueError`` for an id not of the form ``namespace/name-vN``, for a malformed
     entry-point string, and for an id that is already registered (unless ``override=True``).
+    ``uses_traces=True`` marks an environment that takes the ``traces=`` kwarg: its spec lists
+    the trace sets and their provenance (:attr:`EnvSpec.data_sources`).
     """
     if not isinstance(env_id, str) or not _ID_RE.match(env_id):
         raise ValueError(f"invalid env id {env_id!r}: expected the form {_ID_FORM}")
@@ -135,6 +153,7 @@ def register(
         clocks=clocks,
         description=description,
         data_source=data_source,
+        uses_traces=bool(uses_traces),
     )
     _REGISTRY[env_id] = env_spec
     return env_spec
@@ -215,6 +234,10 @@ def _reset_plugins_for_tests() -> None:
 
 # --- built-in environments -----------------------------------------------------------------
 # Lazy string entry points: nothing below imports the simulator or torch.
+TRACES_NOTE = (
+    "leader speed trace set, by name (kwarg `traces`, default synthetic; provenance of each "
+    "in EnvSpec.data_sources) or a TraceSource (kwarg `trace_source`)"
+)
 
 register(
     "vdtn/platoon-control-v0",
@@ -222,7 +245,8 @@ register(
     agents="vehicle_1..vehicle_{N-1} (followers)",
     clocks={"vehicle": 50},
     description="platoon control, one step = one 50 ms control interval, perfect observation",
-    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    data_source=TRACES_NOTE,
+    uses_traces=True,
     impaired=False,
 )
 register(
@@ -235,7 +259,8 @@ register(
         "CAMs with the delay/loss of the C-V2X link layer, driven by an RRA policy "
         "(random by default)"
     ),
-    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    data_source=TRACES_NOTE,
+    uses_traces=True,
     impaired=True,
 )
 register(
@@ -247,7 +272,8 @@ register(
         "C-V2X radio resource allocation, one step = one 1 ms subframe; the platoon is driven "
         "by a control module inside the environment"
     ),
-    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    data_source=TRACES_NOTE,
+    uses_traces=True,
 )
 register(
     "vdtn/vdtn-joint-v0",
@@ -261,5 +287,6 @@ register(
         "joint two-timescale platoon control and C-V2X radio resource allocation; "
         "vehicles act every 50 ms, RRA agents every 1 ms subframe"
     ),
-    data_source="leader speed trace set (kwarg `traces`, default synthetic)",
+    data_source=TRACES_NOTE,
+    uses_traces=True,
 )

@@ -9,6 +9,7 @@ read with :func:`load_trace_source` / :class:`NGSIMTraceSource`.
 from vdtn_marl.data.cycles import (
     CYCLES,
     cycles_available,
+    driving_cycle_info,
     driving_cycle_source,
     load_driving_cycle,
 )
@@ -42,6 +43,7 @@ from vdtn_marl.data.traces import (
     TraceSource,
     get_trace_source,
     register_trace_source,
+    trace_set_provenance,
     trace_source_names,
 )
 
@@ -50,7 +52,9 @@ def _register_cycles() -> None:
     if not cycles_available():
         return
     for name in CYCLES:
-        register_trace_source(name, lambda name=name: driving_cycle_source(name))
+        register_trace_source(
+            name, lambda name=name: driving_cycle_source(name), driving_cycle_info(name)
+        )
 
 
 _register_cycles()
@@ -70,6 +74,7 @@ __all__ = [
     "TraceInfo",
     "TraceSource",
     "cycles_available",
+    "driving_cycle_info",
     "driving_cycle_source",
     "get_trace_source",
     "limit_acceleration",
@@ -83,5 +88,6 @@ __all__ = [
     "preprocess_all",
     "register_trace_source",
     "split",
+    "trace_set_provenance",
     "trace_source_names",
 ]

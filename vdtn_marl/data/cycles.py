@@ -61,14 +61,26 @@ def load_driving_cycle(name: str) -> SpeedProfile:
     return SpeedProfile(t.copy(), v.copy(), vehicle_id=name, source=source)
 
 
-def driving_cycle_source(name: str) -> ProfileTraceSource:
-    """A trace source cutting random windows out of one standard driving cycle."""
-    profile = load_driving_cycle(name)
-    _, description = CYCLES[name]
-    info = TraceInfo(
+LICENSE = (
+    "US EPA dynamometer driving schedules (UDDS: 40 CFR 86 App. I; HWFET: 40 CFR 600 App. I), "
+    "US government work in the public domain; shipped by NREL's fastsim (Apache-2.0)"
+)
+
+
+def driving_cycle_info(name: str, data_source: str | None = None) -> TraceInfo:
+    """Provenance of the cycle ``name`` (no import of the optional package)."""
+    resource, description = CYCLES[name]
+    return TraceInfo(
         name=name,
         description=f"{description} driving cycle, random windows",
         synthetic=False,
-        source=f"{description.split(',')[0]}; data from {profile.source}",
+        source=f"{description.split(',')[0]}; data from "
+        f"{data_source or f'{PACKAGE} resource {resource}'}",
+        license=LICENSE,
     )
-    return ProfileTraceSource([profile], info)
+
+
+def driving_cycle_source(name: str) -> ProfileTraceSource:
+    """A trace source cutting random windows out of one standard driving cycle."""
+    profile = load_driving_cycle(name)
+    return ProfileTraceSource([profile], driving_cycle_info(name, profile.source))

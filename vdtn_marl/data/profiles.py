@@ -20,6 +20,17 @@ from vdtn_marl.data.loaders import LOADERS, SpeedProfile
 from vdtn_marl.data.preprocess import preprocess_all
 from vdtn_marl.data.traces import TraceInfo
 
+NGSIM_LICENSE = (
+    "U.S. DOT open data, terms as published on data.transportation.gov; cite: U.S. "
+    "Department of Transportation Federal Highway Administration, Next Generation Simulation "
+    "(NGSIM) Vehicle Trajectories and Supporting Data"
+)
+FILE_LICENSES = {
+    "ngsim": NGSIM_LICENSE,
+    "highd": "the licence the highD files were obtained under (ika, RWTH Aachen University); "
+    "cite Krajewski et al., The highD Dataset, IEEE ITSC 2018",
+    "csv": "the terms of the user's own file",
+}
 SPLIT_VERSION = "1"
 """Version of the train/eval rule in :func:`split`; changing the rule means bumping this."""
 EVAL_MODULUS = 5
@@ -200,6 +211,7 @@ def load_trace_source(
         f"(part={part}, split v{SPLIT_VERSION})",
         synthetic=False,
         source=profiles[0].source,
+        license=FILE_LICENSES.get(kind, ""),
     )
     return ProfileTraceSource(profiles, info, too_short=too_short)
 
@@ -237,5 +249,6 @@ class NGSIMTraceSource(ProfileTraceSource):
             synthetic=False,
             source="NGSIM vehicle trajectories (U.S. DOT FHWA, Next Generation Simulation), "
             f"file {Path(path).name}",
+            license=NGSIM_LICENSE,
         )
         super().__init__(src.profiles, info, too_short=too_short)

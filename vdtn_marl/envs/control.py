@@ -20,6 +20,10 @@ With ``impaired=True`` every interval's CAMs cross the C-V2X link layer, driven 
 ``rra_policy`` (a callable: RRA observations [1, L, D] → integer actions [1, L]; random by
 default), before the followers decide: late CAMs delay the command switch, lost ones leave the
 follower with older CAM content (docs/model.md §4.5). Without it, observation is perfect.
+
+``completion`` (``"none"``, ``"hold"``, ``"kalman"``, ``"learned"`` with
+``completion_predictor=``, or a completer object) replaces stale CAM content in the impaired
+observations by a prediction (docs/model.md §4.7); with perfect observation it is a no-op.
 """
 
 from __future__ import annotations
@@ -36,6 +40,7 @@ from vdtn_marl.envs.base import (
     vehicle_observation_space,
 )
 from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.sim.completion import make_completion
 
 #: Per-follower info before the first interval closes (same keys and types as interval_infos).
 INITIAL_INTERVAL_INFO = {
@@ -85,12 +90,17 @@ class PlatoonControlEnv(VDTNParallelEnv):
         seed: int | None = None,
         render_mode: str | None = None,
         device: str = "cpu",
+        completion="none",
+        completion_predictor=None,
         **model_kwargs,
     ):
         super().__init__(
             radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )
         self.impaired = impaired
+        self.completion = make_completion(
+            completion, completion_predictor, self.twin.params.platoon
+        )
         self.metadata = {
             **self.metadata,
             "name": "platoon_control_impaired_v0" if impaired else "platoon_control_v0",
@@ -112,6 +122,7 @@ class PlatoonControlEnv(VDTNParallelEnv):
 
     def reset(self, seed: int | None = None, options: dict | None = None):
         self.twin.reset(seed=seed)
+        self.completion.reset()
         if seed is not None and hasattr(self.rra_policy, "seed"):
             self.rra_policy.seed(seed)
         self.agents = self.possible_agents[:]
@@ -126,7 +137,10 @@ class PlatoonControlEnv(VDTNParallelEnv):
             twin.step_subframe(self.rra_policy(twin.rra_observation()))
 
     def _observations(self) -> dict[str, np.ndarray]:
-        obs = self.twin.vehicle_observation(perfect=not self.impaired)[0].cpu().numpy()
+        obs = self.twin.vehicle_observation(perfect=not self.impaired)
+        if self.impaired:
+            obs = self.completion.complete(obs, self.twin.interval)
+        obs = obs[0].cpu().numpy()
         return {name: obs[i] for i, name in enumerate(self.possible_agents)}
 
     def step(self, actions: dict):

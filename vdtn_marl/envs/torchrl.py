@@ -40,6 +40,7 @@ from vdtn_marl.envs.base import rra_observation_space, vehicle_observation_space
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
@@ -73,6 +74,10 @@ class VDTNTorchRLEnv(EnvBase):
             (:class:`~vdtn_marl.envs.rra_reward.RRAReward`), ``"rra"``/``"joint"`` only.
         ivoi_estimator, ivoi_horizon_intervals: the VoI estimator (:mod:`vdtn_marl.voi`).
         trace_source: leader trace set (default: the model's ``traces``).
+        completion, completion_predictor: completion of stale CAM content in the impaired
+            vehicle observations (those of the ``vehicle`` group and those ``control_module``
+            reads): ``"none"``, ``"hold"``, ``"kalman"``, ``"learned"`` or a completer object
+            (:mod:`vdtn_marl.sim.completion`, docs/model.md §4.7); a no-op in ``"control"``.
         **model_kwargs: model parameters for :meth:`TwinParams.from_overrides`
             (e.g. ``num_vehicles=6``, ``episode_intervals=100``).
     """
@@ -96,6 +101,8 @@ class VDTNTorchRLEnv(EnvBase):
         ivoi_scale: float = 20.0,
         miss_penalty: float = 1.0,
         trace_source: str | TraceSource | None = None,
+        completion="none",
+        completion_predictor=None,
         **model_kwargs,
     ):
         if mode not in MODES:
@@ -163,6 +170,7 @@ class VDTNTorchRLEnv(EnvBase):
             self.ivoi_estimator = make_ivoi_estimator(
                 ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
             )
+        self.completion = make_completion(completion, completion_predictor, pp)
         self._bandwidth_hz = params.radio.subchannel_bandwidth_hz
         self._subframe_s = pp.subframe_s
         self._vehicle_obs: torch.Tensor | None = None
@@ -303,6 +311,11 @@ class VDTNTorchRLEnv(EnvBase):
             actions = self.rra_policy(twin.rra_observation())
             twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
 
+    def _impaired_vehicle_obs(self, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """Impaired vehicle observations [B, F, 8] after completion (docs/model.md §4.7)."""
+        obs = self.twin.vehicle_observation(perfect=False)
+        return self.completion.complete(obs, self.twin.interval, mask)
+
     # ------------------------------------------------------------------ outputs
     def _vehicle_acts(self) -> torch.Tensor:
         acts = self.twin.subframe == self.twin.subframes_per_interval - 1
@@ -364,11 +377,13 @@ class VDTNTorchRLEnv(EnvBase):
         full = mask is None or bool(mask.all())
         if full:
             twin.reset()
+            self.completion.reset()
             if self.mode == "control_impaired":
                 self._run_radio()
         elif bool(mask.any()):
             subframe = twin.subframe
             twin.reset(mask=mask)
+            self.completion.reset(mask)
             if self.mode == "control_impaired":
                 self._run_radio(mask)
             elif self.has_rra and subframe < twin.subframes_per_interval:
@@ -376,7 +391,10 @@ class VDTNTorchRLEnv(EnvBase):
 
         vehicle_obs = rra_obs = None
         if self.has_vehicles:
-            fresh = twin.vehicle_observation(perfect=not self.impaired)
+            if not self.impaired:
+                fresh = twin.vehicle_observation(perfect=True)
+            else:
+                fresh = self._impaired_vehicle_obs(None if full or self.mode != "joint" else mask)
             if self.mode == "joint":
                 if full or self._vehicle_obs is None:
                     self._vehicle_obs = fresh
@@ -411,7 +429,7 @@ class VDTNTorchRLEnv(EnvBase):
         all_going = bool(going.all())
         final_obs = None
         if self.impaired and not all_going:
-            final_obs = twin.vehicle_observation(perfect=False)  # what finished scenarios saw last
+            final_obs = self._impaired_vehicle_obs()  # what finished scenarios saw last
         if all_going:
             twin.begin_interval()
             if self.impaired:
@@ -420,7 +438,7 @@ class VDTNTorchRLEnv(EnvBase):
             twin.begin_interval(going)
             if self.impaired:
                 self._run_radio(going)
-        obs = twin.vehicle_observation(perfect=perfect)
+        obs = twin.vehicle_observation(perfect=True) if perfect else self._impaired_vehicle_obs()
         if final_obs is not None:
             obs = torch.where(going[:, None, None], obs, final_obs)
         return self._output(obs, None, record.reward, None, terminated, truncated)
@@ -445,7 +463,7 @@ class VDTNTorchRLEnv(EnvBase):
         final_rra_obs = None
         if closing:
             if commands is None:
-                commands = self.control_module(twin.vehicle_observation(perfect=False))
+                commands = self.control_module(self._impaired_vehicle_obs())
             record = twin.finish_interval(commands, perfect=False)
             xi = self.ivoi_estimator(twin, record)
             lost = record.cam_delay_subframes > twin.subframes_per_interval
@@ -463,7 +481,7 @@ class VDTNTorchRLEnv(EnvBase):
         vehicle_obs = None
         if self.has_vehicles:
             if twin.subframe == last:
-                fresh = twin.vehicle_observation(perfect=False)
+                fresh = self._impaired_vehicle_obs()
                 self._vehicle_obs = (
                     fresh
                     if going is None

@@ -22,6 +22,11 @@ computes ξ_i for every follower, and ``rra_i`` gets κ2·s_ξ·ξ_i on top of i
 With ``vehicles_are_agents=False`` the followers are driven by ``control_module`` (a callable:
 impaired observations [1, F, 8] torch → commands [1, F]; linear CACC by default), which is
 :class:`~vdtn_marl.envs.radio.V2XRRAEnv`.
+
+``completion`` (``"none"``, ``"hold"``, ``"kalman"``, ``"learned"`` with
+``completion_predictor=``, or a completer object) replaces stale CAM content in the vehicle
+observations, those of the agents and those the control module reads, by a prediction
+(docs/model.md §4.7).
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from vdtn_marl.envs.base import (
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
 
 
@@ -64,6 +70,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         seed: int | None = None,
         render_mode: str | None = None,
         device: str = "cpu",
+        completion="none",
+        completion_predictor=None,
         **model_kwargs,
     ):
         self.reward_fn = RRAReward(
@@ -73,6 +81,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )
         twin = self.twin
+        self.completion = make_completion(completion, completion_predictor, twin.params.platoon)
         estimator_kwargs = (
             {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
         )
@@ -126,6 +135,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
     # -- API
     def reset(self, seed: int | None = None, options: dict | None = None):
         self.twin.reset(seed=seed)
+        self.completion.reset()
         self.agents = self.possible_agents[:]
         self.last_record = None
         self._refresh_vehicle_obs()
@@ -134,8 +144,12 @@ class TwoTimescaleEnv(VDTNParallelEnv):
 
     def _refresh_vehicle_obs(self) -> None:
         if self.vehicles_are_agents:
-            obs = self.twin.vehicle_observation(perfect=False)[0].cpu().numpy()
+            obs = self._completed_vehicle_observation()[0].cpu().numpy()
             self._vehicle_obs = {name: obs[i] for i, name in enumerate(self.vehicle_agents)}
+
+    def _completed_vehicle_observation(self) -> torch.Tensor:
+        obs = self.twin.vehicle_observation(perfect=False)
+        return self.completion.complete(obs, self.twin.interval)
 
     def _observations(self) -> dict[str, np.ndarray]:
         rra = self._as_numpy(self.twin.rra_observation())[0].copy()
@@ -193,7 +207,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         closing = ivoi = None
         if closes_interval:
             if commands is None:
-                commands = self.control_module(twin.vehicle_observation(perfect=False))
+                commands = self.control_module(self._completed_vehicle_observation())
             record = twin.finish_interval(commands, perfect=False)
             self.last_record = record
             xi = self.ivoi_estimator(twin, record)
