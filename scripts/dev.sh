@@ -2,7 +2,7 @@
 # Developer entry point for vdtn-marl.
 #
 #   bash scripts/dev.sh setup          create .venv and install the pinned, tested versions
-#   bash scripts/dev.sh run [ARGS]     setup, then python -m vdtn_marl.rollout ARGS
+#   bash scripts/dev.sh run [ARGS]     setup, then vdtn-marl jocc ARGS (the default experiment)
 #   bash scripts/dev.sh test [ARGS]    setup, then ruff check . and python -m pytest -q ARGS
 #   bash scripts/dev.sh bench [ARGS]   setup, then python benchmarks/throughput.py ARGS
 #
@@ -31,7 +31,7 @@ usage: bash scripts/dev.sh COMMAND [ARGS...]
 commands:
   setup    create .venv (if missing) and install torch, then the package with the pins
            in constraints.txt; a no-op when nothing changed since the last setup
-  run      setup, then run a short rollout: python -m vdtn_marl.rollout [ARGS]
+  run      setup, then the default JOCC experiment: vdtn-marl jocc [OVERRIDES]
   test     setup, then ruff check . and python -m pytest -q [ARGS]
   bench    setup, then python benchmarks/throughput.py [ARGS]
 EOF
@@ -124,7 +124,7 @@ case "$command" in
     ;;
   run)
     cmd_setup
-    exec "$VENV_PY" -m vdtn_marl.rollout "$@"
+    exec "$VENV/bin/vdtn-marl" jocc "$@"
     ;;
   test)
     cmd_setup

@@ -92,6 +92,7 @@ class ControlConfig:
     name: str = "learned"
     augmentation: bool = True  # π̃ sees CAM delay/age and its previous command
     completion: str = "none"  # data completion of late/lost CAMs
+    completion_predictor: str | None = None  # completion=learned: path of a trained predictor
 
 
 @dataclass
@@ -173,6 +174,11 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("algo.name", a.name, ALGOS)
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
+    if c.completion == "learned" and not c.completion_predictor:
+        raise ConfigError(
+            "control.completion_predictor=None: control.completion=learned needs the path of a "
+            "predictor saved by vdtn_marl.sim.completion.train_completion_predictor"
+        )
     _choice("rra.name", r.name, RRA_METHODS)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
     _choice("task", cfg.task, TASKS)

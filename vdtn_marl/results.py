@@ -366,3 +366,98 @@ def print_summary(summary: Mapping[str, Any], console: Any = None, title: str = 
             continue
         rich_table.add_row(key, _format_cell(value))
     console.print(rich_table)
+
+
+# --- plots of one run -----------------------------------------------------------------------
+
+TRAINING_CURVES_FILE = "training_curves.png"
+ERROR_TRACES_FILE = "error_traces.png"
+LATENCY_CDF_FILE = "cam_latency_cdf.png"
+
+
+def _save_figure(fig: Any, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    plt.close(fig)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_training_curves(metrics_csv: str | Path, path: str | Path) -> Path:
+    """Mean reward per agent and step of every training stage against its PPO iteration
+    (one panel per stage; the stages' clocks differ, so are their reward scales)."""
+    import pandas as pd
+
+    plt = _pyplot()
+    table = pd.read_csv(metrics_csv)
+    stages = list(dict.fromkeys(table["stage"]))
+    fig, axes = plt.subplots(1, len(stages), figsize=(4.2 * len(stages), 3.4), dpi=120)
+    axes = [axes] if len(stages) == 1 else list(axes)
+    labels = {
+        "control_perfect": "π* (perfect observation), per 50 ms interval",
+        "control_impaired": "π̃ (impaired observation), per 50 ms interval",
+        "rra": "RRA agents, per 1 ms subframe",
+    }
+    for ax, stage in zip(axes, stages, strict=True):
+        rows = table[table["stage"] == stage]
+        ax.plot(rows["iteration"], rows["reward_mean"], marker=".", linewidth=1)
+        ax.set_title(labels.get(stage, stage), fontsize=9)
+        ax.set_xlabel("PPO iteration")
+        ax.set_ylabel("mean reward per agent and step")
+        ax.grid(True, alpha=0.3)
+    return _save_figure(fig, Path(path))
+
+
+def plot_error_traces(
+    gap_error_m: Any, speed_error_mps: Any, interval_s: float, path: str | Path
+) -> Path:
+    """|gap error| (m) and |speed error| (m/s) of every follower over one evaluation scenario;
+    inputs [K, F] (intervals × followers)."""
+    plt = _pyplot()
+    import numpy as np
+
+    gap = np.asarray(gap_error_m)
+    speed = np.asarray(speed_error_mps)
+    time_s = np.arange(gap.shape[0]) * interval_s
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.0), dpi=120, sharex=True)
+    for follower in range(gap.shape[1]):
+        top.plot(time_s, gap[:, follower], linewidth=1, label=f"vehicle {follower + 1}")
+        bottom.plot(time_s, speed[:, follower], linewidth=1)
+    top.set_ylabel("|gap error| (m)")
+    bottom.set_ylabel("|speed error| (m/s)")
+    bottom.set_xlabel("time (s)")
+    top.legend(fontsize=8, ncol=min(gap.shape[1], 4))
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    top.set_title("platoon errors, evaluation scenario 0")
+    return _save_figure(fig, Path(path))
+
+
+def plot_latency_cdf(latencies_ms: Mapping[str, Any], deadline_ms: float, path: str | Path) -> Path:
+    """Empirical CDF of delivered CAMs' latency (ms) per method; the interval deadline marked."""
+    plt = _pyplot()
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for label, values in latencies_ms.items():
+        x = np.sort(np.asarray(values, dtype=float))
+        if x.size:
+            ax.step(x, np.arange(1, x.size + 1) / x.size, where="post", label=label)
+    ax.axvline(deadline_ms, color="black", linestyle="--", linewidth=1, label="interval deadline")
+    ax.set_xlabel("CAM latency (ms)")
+    ax.set_ylabel("fraction of delivered CAMs")
+    ax.set_ylim(0, 1.02)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    return _save_figure(fig, Path(path))

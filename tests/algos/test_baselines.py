@@ -281,3 +281,12 @@ def test_bad_baseline_names_raise_with_allowed_values(factory, allowed):
     with pytest.raises(ValueError, match="'nope'") as err:
         factory("nope", TwinParams())
     assert allowed in str(err.value)
+
+
+def test_oracle_plans_inside_no_grad_evaluation():
+    from vdtn_marl.algos.evaluate import evaluate_system
+
+    params = TwinParams.from_overrides(episode_intervals=5)
+    oracle = make_control_baseline("oracle", params, horizon_intervals=10, iterations=5)
+    result = evaluate_system(params, oracle, None, perfect=True, episodes=2, intervals=5, seed=1)
+    assert result.metrics["collision_rate"] == 0.0

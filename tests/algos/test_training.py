@@ -211,3 +211,16 @@ def test_jocc_and_drra_rewards_differ_from_throughput_exactly_as_specified():
     extra = drra[~closing] - throughput[~closing]
     assert (extra >= -1e-6).all() and extra.sum() > 0
     assert torch.isclose(extra, torch.tensor(0.7)).any()
+
+
+def test_impaired_control_training_with_kalman_completion(tmp_path):
+    from vdtn_marl.config import ControlConfig
+
+    cfg = tiny_config(
+        control=ControlConfig(completion="kalman"),
+        experiment=replace(TINY_EXPERIMENT, control_iterations=1),
+    )
+    summary = JointOptimisation(cfg, tmp_path, task="control_impaired").run()
+    assert summary["trainer_iterations"]["pi_tilde"] == 1
+    assert 0.0 <= summary["cam_delivery_rate"] <= 1.0
+    assert all(p.endswith(".png") for p in summary["plots"])

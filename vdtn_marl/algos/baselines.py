@@ -514,7 +514,8 @@ class OracleController:
         ``switch_subframe`` [B, F] (0..T) is when the first command takes force in the current
         interval (None: 0, perfect observation). Updates the warm start.
         """
-        with _intra_op_threads(self.cpu_threads, twin.device):
+        # gradients are needed even when the caller evaluates under torch.no_grad()
+        with _intra_op_threads(self.cpu_threads, twin.device), torch.enable_grad():
             return self._plan(twin, switch_subframe).transpose(0, 1)
 
     def _plan(self, twin: DigitalTwin, switch_subframe: torch.Tensor | None) -> torch.Tensor:

@@ -78,12 +78,15 @@ def evaluate_system(
     trace_source: str | TraceSource | None = None,
     ivoi_estimator: IVoIEstimator | None = None,
     record_traces: bool = False,
+    completion=None,
 ) -> EvalResult:
     """Run ``episodes`` scenarios for ``intervals`` intervals; see the module doc.
 
     With ``perfect=True`` the radio is off (no CAM impairment, no V2I figures) unless ``rra``
     is given, in which case the radio runs for its metrics but the followers still observe
-    perfectly. With ``perfect=False`` the radio runs with ``rra`` (default: uniformly random).
+    perfectly. With ``perfect=False`` the radio runs with ``rra`` (default: uniformly random)
+    and ``completion`` (a completer of :mod:`vdtn_marl.sim.completion`) fills in stale CAM
+    content before the control policy sees it.
     """
     if intervals > params.episode_intervals:
         raise ValueError(
@@ -102,6 +105,8 @@ def evaluate_system(
     rra = _bind(rra, twin) if rra is not None else None
     if hasattr(rra, "reset"):
         rra.reset()
+    if completion is not None:
+        completion.reset()
     b, f = episodes, twin.num_followers
     dev = twin.device
     alive = torch.ones(b, dtype=torch.bool, device=dev)
@@ -125,7 +130,10 @@ def evaluate_system(
         if radio:
             for _ in range(t):
                 twin.step_subframe(torch.as_tensor(rra(twin.rra_observation())).long())
-        commands = control(twin.vehicle_observation(perfect=perfect))
+        observation = twin.vehicle_observation(perfect=perfect)
+        if completion is not None and not perfect:
+            observation = completion.complete(observation, twin.interval)
+        commands = control(observation)
         record = twin.finish_interval(commands, perfect=perfect)
         live = alive[:, None].double()
         reward = record.reward.double()

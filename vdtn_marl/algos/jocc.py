@@ -57,6 +57,7 @@ from vdtn_marl.runs import (
     progress,
 )
 from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
 
@@ -132,8 +133,14 @@ class JointOptimisation:
         first_rra = "random" if self.rra_learned else rra.name
         self.rra_slot = SwitchablePolicy(make_rra_baseline(first_rra, self.params, cfg.seed))
         drop = () if control.augmentation else AUGMENTATION_FEATURES
+        completion_kw = dict(
+            completion=control.completion, completion_predictor=control.completion_predictor
+        )
+        self.completion = make_completion(
+            control.completion, control.completion_predictor, self.params.platoon
+        )
         self.pi_tilde = PPOTrainer(
-            VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **env_kw),
+            VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **completion_kw, **env_kw),
             "vehicle",
             algo,
             seed=cfg.seed * 8 + 1,
@@ -162,6 +169,7 @@ class JointOptimisation:
                 throughput_scale=rra.throughput_scale,
                 ivoi_scale=rra.ivoi_scale,
                 miss_penalty=rra.miss_penalty,
+                **completion_kw,
                 **env_kw,
             )
             if control.name == "oracle":
@@ -315,6 +323,7 @@ class JointOptimisation:
                 perfect=False,
                 ivoi_estimator=self.estimator,
                 record_traces=True,
+                completion=self.completion,
                 **common,
             )
             evoi, low, high = expected_voi(acting.returns, optimal.returns)
@@ -352,9 +361,42 @@ class JointOptimisation:
                 self._advance()
                 self.save()
         summary = self.summary(time.perf_counter() - began, resumed)
+        summary["plots"] = self.write_plots()
         atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
         self.train_log.close()
         return summary
+
+    def write_plots(self) -> list[str]:
+        """Training curves, and error traces and CAM latency CDF of the last evaluation."""
+        from vdtn_marl import results
+
+        written = []
+        if self.train_log.rows:
+            written.append(
+                results.plot_training_curves(
+                    self.train_log.path, self.run_dir / results.TRAINING_CURVES_FILE
+                )
+            )
+        acting = getattr(self, "_last_results", (None, None))[1]
+        if acting is not None:
+            pp = self.params.platoon
+            written.append(
+                results.plot_error_traces(
+                    acting.traces["gap_error_abs_m"],
+                    acting.traces["speed_error_abs_mps"],
+                    pp.control_interval_s,
+                    self.run_dir / results.ERROR_TRACES_FILE,
+                )
+            )
+            label = f"{self.cfg.rra.name} RRA, {self.cfg.control.name} control"
+            written.append(
+                results.plot_latency_cdf(
+                    {label: acting.cam_latency_ms},
+                    pp.control_interval_s * 1000.0,
+                    self.run_dir / results.LATENCY_CDF_FILE,
+                )
+            )
+        return [str(p) for p in written]
 
     def _advance(self) -> None:
         self.position["stage"] += 1
