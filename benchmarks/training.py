@@ -28,7 +28,7 @@ from vdtn_marl import __version__
 from vdtn_marl.algos.baselines import make_control_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
-from vdtn_marl.config import AlgoConfig
+from vdtn_marl.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import atomic_write_json, progress
 from vdtn_marl.sim.cacc import CACCController
@@ -70,7 +70,7 @@ def main(argv: list[str] | None = None) -> int:
         torch.set_num_threads(args.threads)
     rows: dict[str, object] = {}
 
-    algo = AlgoConfig(num_envs=args.batch, minibatch_size=4096, epochs=4)
+    algo = AlgoConfig(num_envs=args.batch, rollout_steps=50, minibatch_size=4096, epochs=4)
     env = VDTNTorchRLEnv("control", batch_size=args.batch, device=args.device, seed=args.seed)
     trainer = PPOTrainer(env, "vehicle", algo, seed=args.seed, prior=CACCController())
     rows["mappo_batched"] = {"B": args.batch, **frames_per_second(trainer, args.fps_iterations)}
@@ -89,10 +89,17 @@ def main(argv: list[str] | None = None) -> int:
 
     # π* against CACC and the oracle on held-out scenarios (perfect observation)
     params = TwinParams.from_overrides(episode_intervals=max(args.intervals, 200))
+    default = AlgoConfig()  # the training defaults of `vdtn-marl train` / `jocc`
     learner = PPOTrainer(
-        VDTNTorchRLEnv("control", batch_size=64, device=args.device, seed=args.seed),
+        VDTNTorchRLEnv(
+            "control",
+            batch_size=default.num_envs,
+            device=args.device,
+            seed=args.seed,
+            episode_intervals=ScenarioConfig().episode_intervals,
+        ),
         "vehicle",
-        AlgoConfig(num_envs=64),
+        default,
         seed=args.seed,
         prior=CACCController(),
     )

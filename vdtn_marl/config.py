@@ -66,7 +66,7 @@ class AlgoConfig:
     depth: int = 2  # hidden layers
     num_cells: int = 64  # units per hidden layer
     lr: float = 3e-4
-    gamma: float = 0.95  # vehicles: discount per control interval (horizon ≈ 1 s)
+    gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)
     rra_gamma: float = 0.99  # RRA agents: discount per subframe (horizon ≈ 100 ms)
     lmbda: float = 0.95
     clip_epsilon: float = 0.2
@@ -75,9 +75,10 @@ class AlgoConfig:
     critic_coef: float = 1.0
     max_grad_norm: float = 1.0
     epochs: int = 4  # PPO epochs per collected batch
-    minibatch_size: int = 1024  # transitions (scenario × step) per gradient step
-    num_envs: int = 64  # B scenarios collected in parallel
-    rollout_steps: int = 50  # control intervals per scenario per collected batch (vehicles)
+    minibatch_size: int = 512  # transitions (scenario × step) per gradient step
+    num_envs: int = 16  # B scenarios collected in parallel (vehicles)
+    rollout_steps: int = 200  # control intervals per scenario per batch: whole 10 s episodes
+    rra_num_envs: int = 64  # B scenarios collected in parallel (RRA agents)
     rra_rollout_steps: int = 100  # subframes per scenario per collected batch (RRA agents)
 
     @property
@@ -200,6 +201,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         "minibatch_size",
         "num_envs",
         "rollout_steps",
+        "rra_num_envs",
         "rra_rollout_steps",
     ):
         _positive_int(f"algo.{key}", getattr(a, key))
@@ -297,37 +299,115 @@ class BenchmarkConfig:
     """A benchmark: ``scenarios`` × ``methods`` × ``seeds``, every run with ``experiment``.
 
     A method is the list of command-line overrides that selects it, e.g.
-    ``["rra=jocc", "control=learned"]``. ``version`` names the benchmark's definition in
-    published results; bump it whenever scenarios, methods, seeds or budgets change.
+    ``["rra=jocc", "rra.kappa1=0.25"]``. Every run (a *cell*) composes, in this order:
+    ``scenario=S``, ``experiment=E``, ``overrides`` (budgets shared by every cell), the
+    method's overrides, ``budgets[method]`` (the method's own budgets), ``seed=K``. Cells of
+    one scenario must evaluate on the same held-out scenarios (same ``experiment.eval_*`` and
+    seeds), so that methods are compared scenario by scenario.
+
+    ``version`` names the benchmark's definition in published results (it is written into
+    every result file); bump it whenever scenarios, methods, seeds or budgets change.
     """
 
     name: str = "smoke"
     version: str = "0.1"
+    description: str = ""
     experiment: str = "smoke"
+    overrides: list[str] = field(default_factory=list)
     scenarios: list[str] = field(default_factory=lambda: ["platoon4"])
     methods: dict[str, list[str]] = field(default_factory=dict)
+    budgets: dict[str, list[str]] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=lambda: [0])
+    # the two methods whose gap/speed error traces are compared (same scenario and seed)
+    trace_methods: list[str] = field(default_factory=list)
+    bootstrap_resamples: int = 10_000  # percentile bootstrap of the 95% CIs across seeds
+    confidence: float = 0.95
 
 
 @dataclass
 class BenchConfig:
-    """Root config of ``vdtn-marl bench``."""
+    """Root config of ``vdtn-marl bench``.
+
+    ``out_dir`` holds one run directory per cell (``<scenario>/<method>/seed<k>/``); a cell
+    with a complete ``summary.json`` is skipped, so rerunning the command resumes the grid.
+    ``report_dir`` receives LEADERBOARD.md, the JSON and CSV exports and the plots (default:
+    ``out_dir``). ``shard``/``num_shards`` split the grid between the jobs of a Hydra sweep
+    (``-m bench shard=0,1 num_shards=2 hydra/launcher=joblib``).
+    """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    out_dir: str = "outputs/bench/${benchmark.name}-v${benchmark.version}"
+    report_dir: str | None = None
+    shard: int = 0
+    num_shards: int = 1
+    report: bool = True  # write the report once every cell is complete
     device: str = "cpu"
     progress: bool = True
 
 
+#: Keys a benchmark sets itself in every cell; a method or budget may not set them.
+BENCHMARK_RESERVED_KEYS = ("scenario", "seed", "device", "resume", "progress", "checkpoint", "task")
+_NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.+-]*"
+
+
 def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
     """Check the shape of a benchmark (the runs themselves are checked by :func:`validate`)."""
+    import re
+
     b = cfg.benchmark
     if not b.version:
         raise ConfigError("benchmark.version='' must name the benchmark's version, e.g. '0.1'")
+    if not re.fullmatch(_NAME_PATTERN, b.name):
+        raise ConfigError(
+            f"benchmark.name={b.name!r} must be a plain name (letters, digits, _ . + -)"
+        )
     for key in ("scenarios", "methods", "seeds"):
         if not getattr(b, key):
             raise ConfigError(f"benchmark.{key}=[] is empty; list at least one")
     for seed in b.seeds:
         _positive_int("benchmark.seeds", seed, low=0, high=2**63 - 1)
+    for key in ("scenarios", "seeds"):
+        values = list(getattr(b, key))
+        if len(set(values)) != len(values):
+            raise ConfigError(f"benchmark.{key}={values} lists a value twice")
+    for method in b.methods:
+        if not re.fullmatch(_NAME_PATTERN, str(method)):
+            raise ConfigError(
+                f"benchmark.methods.{method} is not a plain name (letters, digits, _ . + -); "
+                "it names the method's directory"
+            )
+    for where, overrides in [
+        ("benchmark.overrides", b.overrides),
+        *((f"benchmark.methods.{m}", o) for m, o in b.methods.items()),
+        *((f"benchmark.budgets.{m}", o) for m, o in b.budgets.items()),
+    ]:
+        for item in overrides:
+            key = str(item).partition("=")[0].lstrip("+~")
+            if key.split(".")[0].split("/")[0] in BENCHMARK_RESERVED_KEYS or key == "experiment":
+                raise ConfigError(
+                    f"{where} sets {item!r}; the benchmark sets scenario, experiment, seed and "
+                    "device itself (use benchmark.scenarios, benchmark.experiment, "
+                    "benchmark.seeds, device=); allowed: any other KEY=VALUE or GROUP=OPTION"
+                )
+    unknown = sorted(set(b.budgets) - set(b.methods))
+    if unknown:
+        raise ConfigError(
+            f"benchmark.budgets.{unknown[0]} names no method; allowed: {', '.join(b.methods)}"
+        )
+    for method in b.trace_methods:
+        if method not in b.methods:
+            raise ConfigError(
+                f"benchmark.trace_methods={list(b.trace_methods)} names {method!r}, which is not "
+                f"a method; allowed: {', '.join(b.methods)}"
+            )
+    _positive_int("benchmark.bootstrap_resamples", b.bootstrap_resamples, low=100, high=10**7)
+    _real("benchmark.confidence", b.confidence, 0.5, 1.0, low_open=True)
+    if b.confidence >= 1.0:
+        raise ConfigError(f"benchmark.confidence={b.confidence!r} must be below 1")
+    _positive_int("num_shards", cfg.num_shards, low=1, high=10**6)
+    _positive_int("shard", cfg.shard, low=0, high=cfg.num_shards - 1)
+    if not cfg.out_dir:
+        raise ConfigError("out_dir='' must name the directory of the benchmark's runs")
     return cfg
 
 

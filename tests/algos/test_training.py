@@ -16,7 +16,12 @@ from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
 
 TINY_ALGO = AlgoConfig(
-    num_envs=8, rollout_steps=10, rra_rollout_steps=50, minibatch_size=128, epochs=2
+    num_envs=8,
+    rollout_steps=10,
+    rra_num_envs=8,
+    rra_rollout_steps=50,
+    minibatch_size=128,
+    epochs=2,
 )
 TINY_EXPERIMENT = ExperimentConfig(
     control_iterations=4, rra_iterations=2, eval_episodes=4, eval_intervals=20, checkpoint_every=2

@@ -161,6 +161,7 @@ class JointOptimisation:
         if self.rra_learned:
             rra_env = VDTNTorchRLEnv(
                 "rra",
+                **{**env_kw, "batch_size": algo.rra_num_envs},
                 control_module=SwitchablePolicy(self._control_policy()),
                 reward=rra.name,
                 kappa1=rra.kappa1,
@@ -170,7 +171,6 @@ class JointOptimisation:
                 ivoi_scale=rra.ivoi_scale,
                 miss_penalty=rra.miss_penalty,
                 **completion_kw,
-                **env_kw,
             )
             if control.name == "oracle":
                 rra_env.control_module.policy = make_control_baseline("oracle", rra_env.twin)
