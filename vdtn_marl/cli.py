@@ -53,7 +53,7 @@ COMMANDS = {
     "jocc": "joint optimisation of control and communication (JOCC): the main experiment",
     "train": "train one agent group: task=control (π*), control_impaired (π̃) or rra",
     "eval": "evaluate the trained policies of a run (checkpoint=RUN_DIR)",
-    "bench": "benchmarks; `bench summarize DIR` tables a sweep and plots the κ1 Pareto front",
+    "bench": "run or resume a leaderboard benchmark (benchmark=NAME); `bench summarize DIR`",
     "envs": "list the registered environments: agents, clocks, descriptions",
     "rollout": "a short random-policy rollout of an environment (quick start)",
 }
@@ -380,26 +380,45 @@ _COMMAND_DETAILS = {
 
 def bench_help() -> str:
     lines = [
-        f"usage: {PROG} bench summarize SWEEP_DIR [--csv PATH] [--plot PATH]",
-        f"       {PROG} bench [benchmark=NAME] [KEY=VALUE ...] [--cfg job]",
+        f"usage: {PROG} bench [benchmark=NAME] [KEY=VALUE ...] [--cfg job]",
+        f"       {PROG} -m bench benchmark=NAME shard=0,1 num_shards=2 hydra/launcher=joblib",
+        f"       {PROG} bench summarize SWEEP_DIR [--csv PATH] [--plot PATH]",
+        "",
+        "bench benchmark=NAME: run a benchmark, scenarios × methods × seeds (conf/benchmark/),",
+        "one `jocc` run per cell in OUT_DIR/<scenario>/<method>/seed<k>/, then aggregate it across",
+        "seeds (mean and IQM with 95% bootstrap CIs) into LEADERBOARD.md, leaderboard.json,",
+        "leaderboard_marl_eval.json (marl-eval raw data), leaderboard.csv and PNG plots in",
+        "REPORT_DIR. Cells with a complete summary.json are skipped: rerun the same command to",
+        "resume. `--cfg job` shows the benchmark.",
         "",
         "bench summarize: collect every job of a finished sweep (its summary.json, config.yaml",
         "and .hydra/overrides.yaml) into one table, printed and written as SWEEP_DIR/summary.csv,",
         "and plot control cost against V2I throughput per link (Mbps) coloured by κ1, with the",
         "Pareto front, as SWEEP_DIR/pareto_kappa1.png.",
         "",
-        "bench benchmark=NAME: a benchmark is scenarios × methods × seeds (conf/benchmark/).",
-        "`--cfg job` shows it; the leaderboard runner that executes it is not available yet.",
-        "",
         "config groups (* marks the default):",
         *_group_lines("bench"),
         "",
+        "keys (default):",
+        f"  out_dir=DIR        the cells' run directories [default: {_bench_default('out_dir')}]",
+        "  report_dir=DIR     where the report goes [default: out_dir]",
+        "  shard=K num_shards=N   this job runs cells K, K+N, ... (for -m sweeps) [0, 1]",
+        "  report=false       run the cells only",
+        "  device=cpu|cuda    device of every run [default: cpu]",
+        "",
         "examples:",
-        "  vdtn-marl -m jocc rra.kappa1=0,0.5,1 seed=0,1 experiment=smoke hydra/launcher=joblib",
-        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
+        "  vdtn-marl bench benchmark=smoke",
+        "  vdtn-marl bench benchmark=reduced report_dir=benchmarks/results",
         "  vdtn-marl bench benchmark=leaderboard --cfg job",
+        "  OMP_NUM_THREADS=1 vdtn-marl -m bench benchmark=leaderboard shard=0,1 num_shards=2 \\",
+        "      hydra/launcher=joblib",
+        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
     ]
     return "\n".join(lines)
+
+
+def _bench_default(key: str) -> str:
+    return str(_read_conf_yaml("bench.yaml").get(key, "?"))
 
 
 # --- bench summarize -----------------------------------------------------------------------
@@ -734,13 +753,9 @@ def _checkpoint_file(value: Any, required: bool) -> Any:
 
 
 def _validate_bench(data: dict, check_runs: bool = True) -> None:
-    from vdtn_marl import config
+    from vdtn_marl import config, leaderboard
 
-    bench_cfg = config.BenchConfig(
-        benchmark=config.BenchmarkConfig(**data["benchmark"]),
-        device=data["device"],
-        progress=data["progress"],
-    )
+    bench_cfg = leaderboard.bench_config(data)
     config.validate_benchmark(bench_cfg)
     config.validate_device(bench_cfg.device)
     b = bench_cfg.benchmark
@@ -749,22 +764,29 @@ def _validate_bench(data: dict, check_runs: bool = True) -> None:
         _require_option("benchmark.scenarios", scenario, "scenario")
     if not check_runs:
         return
-    # Every scenario × method must compose into a valid run (seeds only change `seed`).
+    # Every scenario × method must compose into a valid run (seeds only change `seed`), and
+    # the methods of a scenario must share its held-out evaluation scenarios.
+    composed = {}
     for scenario in b.scenarios:
-        for method, method_overrides in b.methods.items():
+        for method in b.methods:
             overrides = [
-                f"scenario={scenario}",
-                f"experiment={b.experiment}",
+                *leaderboard.cell_overrides(b, scenario, method),
                 f"device={bench_cfg.device}",
-                *method_overrides,
             ]
             try:
-                to_run_config(_job_config(_compose("config", overrides)))
+                data = _job_config(_compose("config", overrides))
+                to_run_config(data)
             except Exception as exc:
                 raise CLIError(
-                    f"benchmark.methods.{method}={list(method_overrides)} on scenario "
+                    f"benchmark.methods.{method}={list(b.methods[method])} on scenario "
                     f"{scenario}: {_translate(exc, 'config', overrides)}"
                 ) from exc
+            composed[leaderboard.Cell(scenario, method, 0, tuple(overrides))] = data
+    try:
+        leaderboard.check_eval_pairing(composed)
+        leaderboard.check_out_dir(bench_cfg)
+    except leaderboard.LeaderboardError as exc:
+        raise CLIError(str(exc)) from exc
 
 
 def _require_option(key: str, value: str, group: str) -> None:
@@ -892,8 +914,40 @@ def _eval_job(cfg: Any) -> dict:
     return run_job("eval", cfg)
 
 
-def _bench_job(cfg: Any) -> None:  # reached only with --cfg/--info, see _cmd_hydra
-    raise NotImplementedError("the leaderboard runner is not available yet")
+def _bench_job(cfg: Any) -> None:
+    """``vdtn-marl bench benchmark=NAME``: run or resume the grid, then write the report."""
+    import shlex
+
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    from vdtn_marl import config, leaderboard
+
+    hydra_cfg = HydraConfig.get()
+    bench_cfg = config.validate_benchmark(leaderboard.bench_config(_job_config(cfg)))
+    multirun = hydra_cfg.mode == RunMode.MULTIRUN
+    # a sweep's job: its own overrides, as one command would set them
+    command = shlex.join([PROG, "bench", *hydra_cfg.overrides.task])
+    try:
+        result = leaderboard.run_benchmark(bench_cfg, command=command)
+    except leaderboard.LeaderboardError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(EXIT_CONFIG_ERROR) from None
+    total = len(leaderboard.plan(bench_cfg))
+    print(
+        f"{bench_cfg.benchmark.name} v{bench_cfg.benchmark.version}: {len(result.ran)} cell(s) "
+        f"run now, {len(result.done) - len(result.ran)} already complete, "
+        f"{len(result.failed)} failed, {len(result.pending)} of {total} still missing; "
+        f"runs in {bench_cfg.out_dir}"
+    )
+    for cell, error in result.failed:
+        print(f"failed: {cell.name}: {error}", file=sys.stderr)
+    if result.report:
+        if not multirun:
+            leaderboard.print_leaderboard(result.report["json"])
+        print(f"report: {result.report['markdown']}")
+    if result.failed and not multirun:
+        raise SystemExit(1)
 
 
 _JOBS = {"train": _train_job, "jocc": _jocc_job, "eval": _eval_job, "bench": _bench_job}
@@ -949,14 +1003,6 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
         except CLIError as exc:
             print(f"error: {exc}", file=sys.stderr)
             return EXIT_CONFIG_ERROR
-        if command == "bench" and not hargs.cfg:
-            print(
-                "error: the leaderboard runner (`vdtn-marl bench benchmark=NAME`) is not "
-                "available yet; allowed now: `vdtn-marl bench summarize SWEEP_DIR` and "
-                "`vdtn-marl bench --cfg job`",
-                file=sys.stderr,
-            )
-            return 1
     return _launch(command, hydra_argv)
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 METRICS_FILE = "metrics.csv"
 EVALUATION_FILE = "evaluation.csv"
+RAW_EVALUATION_FILE = "evaluation_raw.npz"  # arrays of the last evaluation, for plots
 SUMMARY_FILE = "summary.json"
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_DIR = "checkpoints"

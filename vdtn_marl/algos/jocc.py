@@ -51,8 +51,10 @@ from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
     CHECKPOINT_DIR,
     EVALUATION_FILE,
+    RAW_EVALUATION_FILE,
     SUMMARY_FILE,
     MetricsLog,
+    atomic_write_bytes,
     atomic_write_json,
     progress,
 )
@@ -361,10 +363,34 @@ class JointOptimisation:
                 self._advance()
                 self.save()
         summary = self.summary(time.perf_counter() - began, resumed)
+        self.write_raw_evaluation()
         summary["plots"] = self.write_plots()
         atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
         self.train_log.close()
         return summary
+
+    def write_raw_evaluation(self) -> None:
+        """The last evaluation's arrays as ``evaluation_raw.npz``: per-scenario returns of the
+        acting system and of π*, scenario 0's |gap|/|speed| error traces [K, F] and every
+        delivered CAM's latency (ms), for plots across runs (the leaderboard's)."""
+        import io
+
+        import numpy as np
+
+        optimal, acting = getattr(self, "_last_results", (None, None))
+        if acting is None:
+            return
+        arrays = {
+            "interval_s": np.float64(self.params.platoon.control_interval_s),
+            "returns": acting.returns.numpy(),
+            "optimal_returns": optimal.returns.numpy(),
+            **{key: value.numpy() for key, value in acting.traces.items()},
+        }
+        if acting.cam_latency_ms is not None:
+            arrays["cam_latency_ms"] = acting.cam_latency_ms.numpy()
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        atomic_write_bytes(self.run_dir / RAW_EVALUATION_FILE, buffer.getvalue())
 
     def write_plots(self) -> list[str]:
         """Training curves, and error traces and CAM latency CDF of the last evaluation."""
