@@ -128,8 +128,11 @@ class VDTNParallelEnv(ParallelEnv):
         return agent
 
     def _check_action_keys(self, actions: dict) -> None:
-        unknown = set(actions) - set(self.possible_agents)
-        if unknown:
+        known = self.__dict__.get("_known_agents")
+        if known is None or known[0] is not self.possible_agents:
+            known = self._known_agents = (self.possible_agents, frozenset(self.possible_agents))
+        if not known[1].issuperset(actions):
+            unknown = set(actions) - known[1]
             raise KeyError(
                 f"unknown agent(s) {sorted(unknown)} in actions; agents are {self.possible_agents}"
             )
@@ -157,21 +160,26 @@ class VDTNParallelEnv(ParallelEnv):
     def _rra_actions(self, actions: dict, names: list[str]) -> np.ndarray:
         """RRA actions [1, L] (ints) from a dict of Discrete actions, validated."""
         n_act = self.twin.params.radio.num_actions
-        missing = [n for n in names if n not in actions]
-        if missing:
-            raise KeyError(f"missing actions for {missing}")
-        out = np.empty((1, len(names)), np.int64)
-        for i, name in enumerate(names):
-            value = np.asarray(actions[name])
-            if value.shape not in ((), (1,)) or value.dtype.kind not in "iu":
-                raise ValueError(
-                    f"action of {name} = {actions[name]!r} must be one integer in [0, {n_act - 1}]"
-                )
-            a = int(value.reshape(()))
+        out = []
+        for name in names:
+            try:
+                value = actions[name]
+            except KeyError:
+                missing = [n for n in names if n not in actions]
+                raise KeyError(f"missing actions for {missing}") from None
+            if type(value) is int or isinstance(value, np.integer):  # the common case, fast
+                a = int(value)
+            else:
+                array = np.asarray(value)
+                if array.shape not in ((), (1,)) or array.dtype.kind not in "iu":
+                    raise ValueError(
+                        f"action of {name} = {value!r} must be one integer in [0, {n_act - 1}]"
+                    )
+                a = int(array.reshape(()))
             if not 0 <= a < n_act:
                 raise ValueError(f"action of {name} = {a} is outside [0, {n_act - 1}]")
-            out[0, i] = a
-        return out
+            out.append(a)
+        return np.array([out], np.int64)
 
     def _to_twin(self, array: np.ndarray) -> np.ndarray | torch.Tensor:
         return array if self._numpy else torch.as_tensor(array, device=self.twin.device)

@@ -200,8 +200,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         reward, throughput = self.reward_fn.per_subframe(
             outcome, self._bandwidth_hz, self._subframe_s
         )
-        rra_reward = self._as_numpy(reward)[0].astype(np.float64)
-        throughput_mbps = float(self._as_numpy(throughput)[0])
+        rra_reward = self._as_numpy(reward)[0]
+        throughput_mbps = float(throughput[0])
         vehicle_reward = [0.0] * twin.num_followers
         terminated = truncated = False
         closing = ivoi = None
@@ -212,7 +212,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             self.last_record = record
             xi = self.ivoi_estimator(twin, record)
             lost = record.cam_delay_subframes > twin.subframes_per_interval
-            rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost)[0].cpu().numpy()
+            extra = self.reward_fn.at_interval_end(xi, lost)[0].cpu().numpy()
+            rra_reward = rra_reward.astype(np.float64) + extra
             ivoi = xi[0].tolist()
             vehicle_reward = record.reward[0].tolist()
             closing = interval_infos(
@@ -226,7 +227,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             self._refresh_vehicle_obs()
 
         names = self.agents
-        rewards = {name: float(rra_reward[i]) for i, name in enumerate(self.rra_agents)}
+        rewards = dict(zip(self.rra_agents, rra_reward.tolist(), strict=True))
         if self.vehicles_are_agents:
             rewards.update({name: vehicle_reward[i] for i, name in enumerate(self.vehicle_agents)})
         infos = self._infos(closing, ivoi, throughput_mbps)

@@ -13,7 +13,14 @@ from dataclasses import dataclass
 
 import torch
 
+from vdtn_marl.sim.backend import clamp
 from vdtn_marl.sim.params import PlatoonParams
+from vdtn_marl.sim.platoon import (
+    GAP_ERROR_BOUND_M,
+    SPEED_ERROR_BOUND_MPS,
+    PlatoonState,
+    spacing_errors,
+)
 
 
 @dataclass(frozen=True)
@@ -27,11 +34,32 @@ class CACCController:
     accel_gain: float = 0.0
 
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
-        """Commands [..., F] (m/s²) from vehicle observations [..., F, 8]."""
+        """Commands [..., F] (m/s²) from vehicle observations [..., F, 8] (torch or NumPy)."""
         u = (
             self.gap_gain * observation[..., 0]
             + self.speed_gain * observation[..., 1]
             + self.feedforward_gain * observation[..., 4]
             - self.accel_gain * observation[..., 2]
         )
-        return u.clamp(self.params.accel_min_mps2, self.params.accel_max_mps2)
+        return clamp(u, self.params.accel_min_mps2, self.params.accel_max_mps2)
+
+    def perfect_command(
+        self,
+        state: PlatoonState,
+        params: PlatoonParams,
+        gap_error: torch.Tensor | None = None,
+        speed_error: torch.Tensor | None = None,
+    ) -> torch.Tensor:
+        """``self(perfect_observation(state, params))`` without building the features the law
+        does not read: the same operations, so the same numbers. ``gap_error`` and
+        ``speed_error`` are ``spacing_errors(state, params)`` when the caller has them."""
+        if gap_error is None or speed_error is None:
+            gap_error, speed_error = spacing_errors(state, params)
+        lo, hi = params.accel_min_mps2, params.accel_max_mps2
+        u = (
+            self.gap_gain * clamp(gap_error, -GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M)
+            + self.speed_gain * clamp(speed_error, -SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS)
+            + self.feedforward_gain * clamp(state.command_mps2[:, :-1], lo, hi)
+            - self.accel_gain * clamp(state.accel_mps2[:, 1:], lo, hi)
+        )
+        return clamp(u, self.params.accel_min_mps2, self.params.accel_max_mps2)

@@ -3,15 +3,19 @@
 Geometry: a straight highway along x; every vehicle drives in one lane at y = 0, height
 ``vehicle_height_m``; base stations stand every ``inter_site_distance_m`` at y =
 ``bs_road_offset_m``, height ``bs_height_m``. All functions are batched over leading dimensions
-and return float tensors in dB (path loss, shadowing) or linear power gain (fast fading).
+and return float tensors in dB (path loss, shadowing) or linear power gain (fast fading). The
+deterministic ones also run on NumPy arrays (:mod:`vdtn_marl.sim.backend`); random draws are
+always made with the twin's torch generator.
 """
 
 from __future__ import annotations
 
 import math
 
+import numpy as np
 import torch
 
+from vdtn_marl.sim.backend import clamp, exp, exp10, log10, sqrt, xp
 from vdtn_marl.sim.params import RadioParams
 
 SPEED_OF_LIGHT_MPS = 3e8
@@ -19,7 +23,7 @@ SPEED_OF_LIGHT_MPS = 3e8
 
 def v2i_pathloss_db(distance_3d_m: torch.Tensor) -> torch.Tensor:
     """V2I path loss 128.1 + 37.6·log10(d/km) in dB (TR 36.885 macro; docs/model.md §4.2)."""
-    return 128.1 + 37.6 * torch.log10(distance_3d_m.clamp_min(1.0) / 1000.0)
+    return 128.1 + 37.6 * log10(clamp(distance_3d_m, 1.0) / 1000.0)
 
 
 def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tensor:
@@ -32,10 +36,11 @@ def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tenso
     f_ghz = radio.carrier_ghz
     h = radio.vehicle_height_m
     breakpoint_m = 4.0 * (h - 1.0) ** 2 * f_ghz * 1e9 / SPEED_OF_LIGHT_MPS
-    d = distance_m.clamp_min(3.0)
-    near = 22.7 * torch.log10(d) + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
-    far = 40.0 * torch.log10(d) + 9.45 - 2 * 17.3 * math.log10(h) + 2.7 * math.log10(f_ghz / 5.0)
-    return torch.where(d < breakpoint_m, near, far)
+    d = clamp(distance_m, 3.0)
+    log_d = log10(d)
+    near = 22.7 * log_d + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
+    far = 40.0 * log_d + 9.45 - 2 * 17.3 * math.log10(h) + 2.7 * math.log10(f_ghz / 5.0)
+    return xp(d).where(d < breakpoint_m, near, far)
 
 
 def serving_bs_x_m(
@@ -43,7 +48,7 @@ def serving_bs_x_m(
 ) -> torch.Tensor:
     """Along-road position of the base station nearest to ``centroid_x_m`` (m), shape [B]."""
     isd = radio.inter_site_distance_m
-    return bs_offset_m + isd * torch.round((centroid_x_m - bs_offset_m) / isd)
+    return bs_offset_m + isd * xp(centroid_x_m).round((centroid_x_m - bs_offset_m) / isd)
 
 
 def v2i_distance_m(
@@ -52,18 +57,25 @@ def v2i_distance_m(
     """3-D vehicle-to-BS distance in m; ``vehicle_x_m`` [B, N], ``bs_x_m`` [B] → [B, N]."""
     dx = vehicle_x_m - bs_x_m[:, None]
     dz = radio.bs_height_m - radio.vehicle_height_m
-    return torch.sqrt(dx * dx + radio.bs_road_offset_m**2 + dz * dz)
+    return sqrt(dx * dx + radio.bs_road_offset_m**2 + dz * dz)
 
 
 def v2v_distance_m(vehicle_x_m: torch.Tensor) -> torch.Tensor:
     """Pairwise vehicle distance in m (same lane, same height), [B, N] → [B, N, N]."""
-    return (vehicle_x_m[:, :, None] - vehicle_x_m[:, None, :]).abs()
+    return abs(vehicle_x_m[:, :, None] - vehicle_x_m[:, None, :])
 
 
-def symmetric_normal(shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
-    """Standard normal [..., N, N] with X[i, j] = X[j, i] (reciprocal links), unit variance."""
+def symmetric_normal(
+    shape: tuple[int, ...], generator: torch.Generator, numpy: bool = False
+) -> torch.Tensor | np.ndarray:
+    """Standard normal [..., N, N] with X[i, j] = X[j, i] (reciprocal links), unit variance.
+
+    ``numpy=True``: the same draws and numbers as a NumPy array (CPU generator).
+    """
     x = torch.randn(shape, generator=generator, device=generator.device)
-    return (x + x.transpose(-1, -2)) * (0.5**0.5)
+    if numpy:
+        x = x.numpy()
+    return (x + x.swapaxes(-1, -2)) * (0.5**0.5)
 
 
 def shadowing_update_db(
@@ -78,17 +90,24 @@ def shadowing_update_db(
     s' = ρ·s + sqrt(1 − ρ²)·σ·n with ρ = exp(−Δd/d_corr); ``moved_m`` broadcasts to ``shadow_db``
     and ``innovation`` is a standard normal draw of the same shape.
     """
-    rho = torch.exp(-moved_m / decorrelation_m)
-    return rho * shadow_db + torch.sqrt((1.0 - rho * rho).clamp_min(0.0)) * std_db * innovation
+    rho = exp(-moved_m / decorrelation_m)
+    return rho * shadow_db + sqrt(clamp(1.0 - rho * rho, 0.0)) * std_db * innovation
 
 
-def rayleigh_power_gain(shape: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:
-    """Rayleigh fast-fading power gains |h|² = (x² + y²)/2 with x, y ~ N(0, 1); mean 1."""
+def rayleigh_power_gain(
+    shape: tuple[int, ...], generator: torch.Generator, numpy: bool = False
+) -> torch.Tensor | np.ndarray:
+    """Rayleigh fast-fading power gains |h|² = (x² + y²)/2 with x, y ~ N(0, 1); mean 1.
+
+    ``numpy=True``: the same draws and numbers as a NumPy array (CPU generator).
+    """
     xy = torch.randn((2, *shape), generator=generator, device=generator.device)
+    if numpy:
+        xy = xy.numpy()
     return 0.5 * (xy[0] * xy[0] + xy[1] * xy[1])
 
 
-def db_to_linear(db: torch.Tensor | float) -> torch.Tensor | float:
-    if isinstance(db, torch.Tensor):
-        return torch.pow(10.0, db / 10.0)
+def db_to_linear(db: torch.Tensor | np.ndarray | float) -> torch.Tensor | np.ndarray | float:
+    if isinstance(db, torch.Tensor | np.ndarray):
+        return exp10(db / 10.0)
     return 10.0 ** (db / 10.0)

@@ -20,13 +20,12 @@ from functools import lru_cache
 import numpy as np
 import torch
 
+from vdtn_marl.sim.backend import Array, cat, clamp, log10, sum_axis
 from vdtn_marl.sim.channel import (
     db_to_linear,
     rayleigh_power_gain,
 )
 from vdtn_marl.sim.params import RadioParams
-
-Array = torch.Tensor | np.ndarray
 
 #: RRA observation feature blocks, in order (docs/model.md §4.6).
 RRA_OBS_GAIN_SCALE_DB = 10.0  # dB values are divided by this
@@ -135,9 +134,17 @@ def large_scale_gains_db(
 
 
 @lru_cache(maxsize=32)
-def _link_layout(num_vehicles: int, num_subchannels: int, device: torch.device):
-    """Index constants of the PF link layout: tx, rx, V2I user per sub-channel, off-diagonal."""
+def _link_layout(num_vehicles: int, num_subchannels: int, device: torch.device | None):
+    """Index constants of the PF link layout: tx, rx, V2I user per sub-channel, off-diagonal.
+
+    ``device=None``: NumPy arrays.
+    """
     links = num_vehicles - 1
+    if device is None:
+        tx = np.arange(links)
+        v2i_user = np.arange(num_subchannels) % num_vehicles
+        off_diagonal = (1.0 - np.eye(links)).astype(np.float32)
+        return tx, tx + 1, v2i_user, off_diagonal
     tx = torch.arange(links, device=device)
     v2i_user = torch.arange(num_subchannels, device=device) % num_vehicles
     off_diagonal = 1.0 - torch.eye(links, device=device)
@@ -156,23 +163,27 @@ def build_interval_tables(
     ``v2v_gain_db`` [B, N, N] (tx row, rx column) and ``v2i_gain_db`` [B, N] come from
     :func:`large_scale_gains_db`. V2V link l runs from vehicle l to vehicle l+1; V2I user m is
     vehicle m mod N. Fading draws happen in a fixed order so that a seeded generator
-    reproduces the same tables.
+    reproduces the same tables. With NumPy gains (the single-scenario fast path) the fading is
+    drawn with the same torch generator and the tables are NumPy arrays.
     """
     b, n = v2i_gain_db.shape
     links, subch, t = n - 1, radio.num_subchannels, num_subframes
-    tx, rx, v2i_user, off_diagonal = _link_layout(n, subch, v2i_gain_db.device)
+    numpy = isinstance(v2i_gain_db, np.ndarray)
+    tx, rx, v2i_user, off_diagonal = _link_layout(n, subch, None if numpy else v2i_gain_db.device)
     v2i_power_mw = db_to_linear(radio.v2i_power_dbm)
 
     v2v_lin = db_to_linear(v2v_gain_db)  # [B, N, N]
     v2i_lin = db_to_linear(v2i_gain_db)  # [B, N]
     own_ls = v2v_lin[:, tx, rx]  # [B, L]
-    v2i_to_rx_ls = v2v_lin[:, v2i_user][:, :, rx].transpose(1, 2)  # [B, L, M]
+    v2i_to_rx_ls = v2v_lin[:, v2i_user][:, :, rx].swapaxes(1, 2)  # [B, L, M]
     tx_to_bs_ls = v2i_lin[:, tx]  # [B, L]
-    cross_ls = v2v_lin[:, tx][:, :, rx].transpose(1, 2)  # [B, L_rx, L_tx]
+    cross_ls = v2v_lin[:, tx][:, :, rx].swapaxes(1, 2)  # [B, L_rx, L_tx]
     cross_ls = cross_ls * off_diagonal
     v2i_signal_ls = v2i_lin[:, v2i_user] * v2i_power_mw  # [B, M]
 
-    fading = rayleigh_power_gain((t, b, 3 * links * subch + links * links + subch), generator)
+    fading = rayleigh_power_gain(
+        (t, b, 3 * links * subch + links * links + subch), generator, numpy=numpy
+    )
     block = links * subch
     cut = (0, block, 2 * block, 3 * block, 3 * block + links * links)
     own = fading[..., cut[0] : cut[1]].reshape(t, b, links, subch) * own_ls[None, :, :, None]
@@ -186,7 +197,16 @@ def build_interval_tables(
 
 
 def new_link_state(batch: int, links: int, subchannels: int, radio: RadioParams, t: int, device):
-    """A fresh CAM of ``cam_size_bits`` on every link, nothing delivered yet."""
+    """A fresh CAM of ``cam_size_bits`` on every link, nothing delivered yet.
+
+    ``device=None``: NumPy arrays.
+    """
+    if device is None:
+        return LinkState(
+            remaining_bits=np.full((batch, links), float(radio.cam_size_bits), np.float32),
+            delay_subframes=np.full((batch, links), t + 1, np.int64),
+            occupancy=np.zeros((batch, subchannels), np.float32),
+        )
     return LinkState(
         remaining_bits=torch.full((batch, links), float(radio.cam_size_bits), device=device),
         delay_subframes=torch.full((batch, links), t + 1, dtype=torch.long, device=device),
@@ -240,46 +260,45 @@ def subframe_step(
 
     # entry [b, l, channel[b, l]] of a contiguous [B, L, M] array, as one flat gather
     flat = const.row_offset + channel
-    own = xp.take(tables.own_gain[subframe], flat)
-    from_v2i = xp.take(tables.v2i_to_rx_mw[subframe], flat)
+    own = tables.own_gain[subframe].take(flat)
+    from_v2i = tables.v2i_to_rx_mw[subframe].take(flat)
     # received V2V power at each receiver on each sub-channel, then the receiver's own channel
     rx_per_channel = xp.matmul(tables.cross_gain[subframe], power_onehot)  # [B, L, M]
-    from_v2v = xp.take(rx_per_channel, flat)
+    from_v2v = rx_per_channel.take(flat)
     v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
     v2v_bits = xp.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
 
-    bs_interference = (power_onehot * tables.tx_to_bs_gain[subframe]).sum(axis=1)  # [B, M]
+    bs_interference = sum_axis(power_onehot * tables.tx_to_bs_gain[subframe], 1)  # [B, M]
     v2i_sinr = tables.v2i_signal_mw[subframe] / (const.noise_mw + bs_interference)
     v2i_rate = xp.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
 
     state.remaining_bits = state.remaining_bits - v2v_bits
     delivered_now = pending & (state.remaining_bits <= 0)
     state.delay_subframes = xp.where(delivered_now, subframe + 1, state.delay_subframes)
-    state.occupancy = tx_onehot.sum(axis=1)
+    state.occupancy = sum_axis(tx_onehot, 1)
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
 
 
-def gain_feature(ratio: torch.Tensor) -> torch.Tensor:
+def gain_feature(ratio: Array) -> Array:
     """A power ratio in dB, in units of ``RRA_OBS_GAIN_SCALE_DB``, clipped (observation scale)."""
-    db = 10.0 * torch.log10(ratio.clamp_min(1e-30))
-    return (db / RRA_OBS_GAIN_SCALE_DB).clamp(*RRA_OBS_GAIN_CLIP)
+    db = 10.0 * log10(clamp(ratio, 1e-30))
+    return clamp(db / RRA_OBS_GAIN_SCALE_DB, *RRA_OBS_GAIN_CLIP)
 
 
-def rra_static_observation(
-    tables: IntervalTables, radio: RadioParams, noise_mw: float
-) -> torch.Tensor:
+def rra_static_observation(tables: IntervalTables, radio: RadioParams, noise_mw: float) -> Array:
     """Per-subframe CSI features of each link, [T, B, L, 3M] (docs/model.md §4.6).
 
     Blocks: own link SNR at maximum power; interference-to-noise it would cause at the BS at
     maximum power; interference-to-noise it suffers from each V2I user. All in units of 10 dB.
+    Torch tables give a tensor, NumPy tables an array.
     """
     snr_at_max_power = float(db_to_linear(max(radio.v2v_power_levels_dbm))) / noise_mw
-    ratios = torch.cat(
+    ratios = cat(
         [
             tables.own_gain * snr_at_max_power,
             tables.tx_to_bs_gain * snr_at_max_power,
             tables.v2i_to_rx_mw * (1.0 / noise_mw),
         ],
-        dim=-1,
+        axis=-1,
     )
     return gain_feature(ratios)

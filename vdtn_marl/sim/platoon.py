@@ -9,14 +9,21 @@ Integration is explicit Euler per 1 ms subframe with a zero-order hold on the co
 force. Within an interval the command switches once, from u_{k−1} to u_k at subframe d, so the
 T-step recursion has the closed form z_T = Φ^T·z_0 + (G_T − G_{T−d})·u_{k−1} + G_{T−d}·u_k with
 G_n = Σ_{j<n} Φ^j·Γ, which :class:`IntervalIntegrator` precomputes once.
+
+Apart from :func:`initial_state` (which draws from the twin's generator) every function also
+runs on NumPy arrays, with the same float32 operations in the same order
+(:mod:`vdtn_marl.sim.backend`): that is the single-scenario fast path of the PettingZoo
+environments and of the rollout VoI estimator.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
+import numpy as np
 import torch
 
+from vdtn_marl.sim.backend import cast_like, cat, clamp, repeat_rows, stack, to_numpy, to_torch, xp
 from vdtn_marl.sim.params import PlatoonParams
 
 #: Vehicle observation features, in order (docs/model.md §2.4).
@@ -60,7 +67,30 @@ class PlatoonState:
 
     def repeat(self, times: int) -> PlatoonState:
         """Repeat every scenario ``times`` times along the batch (branch-major: [times·B])."""
-        return PlatoonState(*(getattr(self, f.name).repeat(times, 1) for f in fields(self)))
+        return PlatoonState(
+            repeat_rows(self.position_m, times),
+            repeat_rows(self.speed_mps, times),
+            repeat_rows(self.accel_mps2, times),
+            repeat_rows(self.command_mps2, times),
+        )
+
+    def numpy(self) -> PlatoonState:
+        """The same state as NumPy arrays (views of CPU tensors, no copy)."""
+        return PlatoonState(
+            to_numpy(self.position_m),
+            to_numpy(self.speed_mps),
+            to_numpy(self.accel_mps2),
+            to_numpy(self.command_mps2),
+        )
+
+    def torch(self) -> PlatoonState:
+        """The same state as torch tensors (NumPy arrays are shared, not copied)."""
+        return PlatoonState(
+            to_torch(self.position_m),
+            to_torch(self.speed_mps),
+            to_torch(self.accel_mps2),
+            to_torch(self.command_mps2),
+        )
 
 
 def gaps_m(position_m: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
@@ -131,6 +161,9 @@ class IntervalIntegrator:
         self.phi_t = powers[t].to(device=device, dtype=dtype)  # [3, 3]
         self.input_gain = g.to(device=device, dtype=dtype)  # [T+1, 3]
         self.leader_pos_gain = dt * dt * t * (t - 1) / 2.0  # p += T·dt·v + this·a
+        # the same matrices for NumPy states (the single-scenario fast path)
+        self._phi_t_np = self.phi_t.cpu().numpy()
+        self._input_gain_np = self.input_gain.cpu().numpy()
 
     def integrate(
         self,
@@ -143,31 +176,38 @@ class IntervalIntegrator:
 
         ``leader_accel_mps2`` [B]; ``command_mps2`` [B, N−1] = u_k, clipped to the actuator
         bounds; ``switch_subframe`` [B, N−1] int in 0..T: u_{k−1} is in force for subframes
-        < d and u_k from d on (d = T: u_k takes force at the next interval).
+        < d and u_k from d on (d = T: u_k takes force at the next interval). Torch tensors, or
+        NumPy arrays for a NumPy state.
         """
         p = self.params
         t = p.subframes_per_interval
-        u_new = command_mps2.clamp(p.accel_min_mps2, p.accel_max_mps2)
+        u_new = clamp(command_mps2, p.accel_min_mps2, p.accel_max_mps2)
         u_old = state.command_mps2[:, 1:]
-        z = torch.stack(
-            [state.position_m[:, 1:], state.speed_mps[:, 1:], state.accel_mps2[:, 1:]], dim=-1
-        )
-        g_all = self.input_gain[t]  # [3]
-        g_new = self.input_gain[t - switch_subframe]  # [B, F, 3]
-        z = z @ self.phi_t.T + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
+        z = stack([state.position_m[:, 1:], state.speed_mps[:, 1:], state.accel_mps2[:, 1:]])
+        if isinstance(z, np.ndarray):
+            phi, gain = self._phi_t_np, self._input_gain_np
+            # z @ Φᵀ as torch's small matmul computes it (products summed in order k = 0, 1, 2,
+            # no fused multiply-add), so the two backends agree bitwise
+            z_phi = z[..., 0:1] * phi[:, 0] + z[..., 1:2] * phi[:, 1] + z[..., 2:3] * phi[:, 2]
+        else:
+            phi, gain = self.phi_t, self.input_gain
+            z_phi = z @ phi.T
+        g_all = gain[t]  # [3]
+        g_new = gain[t - switch_subframe]  # [B, F, 3]
+        z = z_phi + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
 
         interval_s = p.control_interval_s
         lead_v = state.speed_mps[:, 0]
         lead_p = (
             state.position_m[:, 0] + interval_s * lead_v + self.leader_pos_gain * leader_accel_mps2
         )
-        lead_v = (lead_v + interval_s * leader_accel_mps2).clamp_min(0.0)
+        lead_v = clamp(lead_v + interval_s * leader_accel_mps2, 0.0)
 
-        position = torch.cat([lead_p[:, None], z[..., 0]], dim=1)
-        speed = torch.cat([lead_v[:, None], z[..., 1].clamp_min(0.0)], dim=1)
-        accel = torch.cat([leader_accel_mps2[:, None], z[..., 2]], dim=1)
+        position = cat([lead_p[:, None], z[..., 0]], axis=1)
+        speed = cat([lead_v[:, None], clamp(z[..., 1], 0.0)], axis=1)
+        accel = cat([leader_accel_mps2[:, None], z[..., 2]], axis=1)
         # u_k is in force at the start of the next interval, whatever its switch time was
-        command = torch.cat([leader_accel_mps2[:, None], u_new], dim=1)
+        command = cat([leader_accel_mps2[:, None], u_new], axis=1)
         return PlatoonState(position, speed, accel, command)
 
 
@@ -184,10 +224,10 @@ def control_reward(
     """
     jerk = (command_mps2 - prev_command_mps2) / params.control_interval_s
     return -(
-        gap_error_m.abs() / params.gap_error_scale_m
-        + params.weight_speed * speed_error_mps.abs() / params.speed_error_scale_mps
-        + params.weight_accel * command_mps2.abs() / params.accel_max_mps2
-        + params.weight_jerk * jerk.abs() / params.jerk_max_mps3
+        abs(gap_error_m) / params.gap_error_scale_m
+        + params.weight_speed * abs(speed_error_mps) / params.speed_error_scale_mps
+        + params.weight_accel * abs(command_mps2) / params.accel_max_mps2
+        + params.weight_jerk * abs(jerk) / params.jerk_max_mps3
     )
 
 
@@ -208,29 +248,28 @@ def vehicle_observation(
     """
     gap_error, speed_error = spacing_errors(state, params)
     lo, hi = params.accel_min_mps2, params.accel_max_mps2
-    return torch.stack(
+    return stack(
         [
-            gap_error.clamp(-GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M),
-            speed_error.clamp(-SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS),
-            state.accel_mps2[:, 1:].clamp(lo, hi),
-            cam_content[..., 0].clamp(lo, hi),
-            cam_content[..., 1].clamp(lo, hi),
-            cam_delay_ms.to(gap_error.dtype),
-            cam_age_ms.to(gap_error.dtype).clamp(0.0, CAM_AGE_BOUND_MS),
-            state.command_mps2[:, 1:].clamp(lo, hi),
-        ],
-        dim=-1,
+            clamp(gap_error, -GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M),
+            clamp(speed_error, -SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS),
+            clamp(state.accel_mps2[:, 1:], lo, hi),
+            clamp(cam_content[..., 0], lo, hi),
+            clamp(cam_content[..., 1], lo, hi),
+            cast_like(cam_delay_ms, gap_error),
+            clamp(cast_like(cam_age_ms, gap_error), 0.0, CAM_AGE_BOUND_MS),
+            clamp(state.command_mps2[:, 1:], lo, hi),
+        ]
     )
 
 
 def cam_snapshot(state: PlatoonState) -> torch.Tensor:
     """CAM content each follower would receive from its predecessor now: [B, N−1, 2]."""
-    return torch.stack([state.accel_mps2[:, :-1], state.command_mps2[:, :-1]], dim=-1)
+    return stack([state.accel_mps2[:, :-1], state.command_mps2[:, :-1]])
 
 
 def perfect_observation(state: PlatoonState, params: PlatoonParams) -> torch.Tensor:
     """Observation with an exact, instantaneous CAM (delay 0, age 0), [B, N−1, 8]."""
-    zeros = torch.zeros_like(state.speed_mps[:, 1:])
+    zeros = xp(state.speed_mps).zeros_like(state.speed_mps[:, 1:])
     return vehicle_observation(state, cam_snapshot(state), zeros, zeros, params)
 
 

@@ -13,10 +13,22 @@ Life cycle of one control interval k (docs/model.md §1, §4.5):
 
 The twin knows nothing of RL APIs. Every random number comes from one seeded
 ``torch.Generator`` on the twin's device.
+
+With ``backend="numpy"`` (CPU; the single-scenario path of the PettingZoo environments) the
+per-subframe kernel and the per-interval work (channel update, tables, observations, platoon
+integration) run on NumPy views of the twin's state, with the same float32 operations in the
+same order as the torch path and the same draws from the same torch generator, so both
+backends give the same numbers (:mod:`vdtn_marl.sim.backend`); a torch call per NumPy operation
+would cost several times more at B = 1. Public state attributes and return values stay torch
+tensors (CPU tensors sharing memory with those arrays); the interval tables, the link state and
+the RRA observation are NumPy arrays on this backend. The twin's own torch calls (draws, a few
+transcendental functions) run on one intra-op thread there, see
+:func:`~vdtn_marl.sim.backend.single_intra_op_thread`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 
@@ -25,6 +37,16 @@ import torch
 
 from vdtn_marl.data.traces import TraceSource, get_trace_source
 from vdtn_marl.sim import channel, link
+from vdtn_marl.sim.backend import (
+    as_float,
+    clamp,
+    mean_axis,
+    single_intra_op_thread,
+    stack,
+    to_numpy,
+    to_torch,
+    xp,
+)
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.sim.platoon import (
     IntervalIntegrator,
@@ -91,8 +113,9 @@ class DigitalTwin:
         trace_source: leader trace set, by name or instance (default ``params.traces``).
         radio: simulate the radio (False for the perfect-observation control env: faster,
             and CAMs are then exact and instantaneous).
-        backend: ``"torch"`` or ``"numpy"``; ``"numpy"`` runs the per-subframe kernel on NumPy
-            views of the interval tables (CPU, single scenario fast path). Draws stay in torch.
+        backend: ``"torch"`` or ``"numpy"``; ``"numpy"`` runs the per-subframe kernel and the
+            per-interval work on NumPy arrays (CPU, single-scenario fast path, same numbers).
+            Draws stay in torch.
         lookahead_intervals: extra leader trace beyond the episode, for VoI rollouts.
     """
 
@@ -139,6 +162,9 @@ class DigitalTwin:
         self.integrator = IntervalIntegrator(pp, self.device)
         t = pp.subframes_per_interval  # fraction of the interval left at each subframe, [T]
         self._time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
+        self._numpy = backend == "numpy"
+        if self._numpy:
+            self._time_left = self._time_left.numpy()
         self._decode_torch = link.ActionTables.build(rp, self.device)
         self._const_torch = link.KernelConstants.build(
             rp, pp.subframe_s, self.batch_size, self.num_links, self.device
@@ -158,8 +184,16 @@ class DigitalTwin:
                 raise ConfigError(f"seed={seed!r} must be a non-negative integer or None")
             self.generator.manual_seed(int(seed))
 
+    def _torch_calls(self):
+        """Context of the twin's own torch calls: one intra-op thread on the NumPy backend."""
+        return single_intra_op_thread() if self._numpy else contextlib.nullcontext()
+
     def reset(self, seed: int | None = None, mask: torch.Tensor | None = None) -> None:
         """Start new episodes in all scenarios, or only where ``mask`` [B] is True."""
+        with self._torch_calls():
+            self._reset(seed, mask)
+
+    def _reset(self, seed: int | None, mask: torch.Tensor | None) -> None:
         if seed is not None:
             self.seed(seed)
         b, pp, rp = self.batch_size, self.params.platoon, self.params.radio
@@ -220,6 +254,17 @@ class DigitalTwin:
         out[idx] = values
         return out
 
+    def _native(self, x):
+        """A state tensor in the backend's array type (a NumPy view on the NumPy backend)."""
+        return to_numpy(x) if self._numpy else x
+
+    def _public(self, x) -> torch.Tensor:
+        """A backend array as a torch tensor (shares the NumPy array's memory)."""
+        return to_torch(x) if self._numpy else x
+
+    def _native_platoon(self) -> PlatoonState:
+        return self.platoon.numpy() if self._numpy else self.platoon
+
     # ------------------------------------------------------------------ interval start
     def begin_interval(self, mask: torch.Tensor | None = None) -> None:
         """Generate CAM_k, update the large-scale channel, draw the interval's fast fading.
@@ -227,7 +272,11 @@ class DigitalTwin:
         With ``mask`` only the masked scenarios start a new interval (after a partial reset);
         the others keep their current interval unchanged.
         """
-        snapshot = cam_snapshot(self.platoon)
+        with self._torch_calls():
+            self._begin_interval(mask)
+
+    def _begin_interval(self, mask: torch.Tensor | None) -> None:
+        snapshot = self._public(cam_snapshot(self._native_platoon()))
         self.cam_snapshot = (
             snapshot
             if mask is None
@@ -239,17 +288,25 @@ class DigitalTwin:
         rp, t = self.params.radio, self.subframes_per_interval
         tables = self._draw_interval_tables()
         link_state = link.new_link_state(
-            self.batch_size, self.num_links, self.num_subchannels, rp, t, self.device
+            self.batch_size,
+            self.num_links,
+            self.num_subchannels,
+            rp,
+            t,
+            None if self._numpy else self.device,
         )
         obs = self._rra_observation_buffer(tables)
-        v2i_sum = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+        if self._numpy:
+            v2i_sum = np.zeros((self.batch_size, self.num_subchannels), np.float32)
+        else:
+            v2i_sum = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
         if mask is not None:
             tables, link_state, obs, v2i_sum = self._merge_interval(
                 mask, tables, link_state, obs, v2i_sum
             )
-        if self.backend == "numpy":
-            tables, link_state = tables.numpy(), link_state.numpy()
-            obs, v2i_sum = obs.numpy(), v2i_sum.numpy()
+            if self._numpy:
+                tables, link_state = tables.numpy(), link_state.numpy()
+                obs, v2i_sum = obs.numpy(), v2i_sum.numpy()
         self.tables, self.link_state, self._rra_obs, self._v2i_rate_sum = (
             tables,
             link_state,
@@ -259,6 +316,7 @@ class DigitalTwin:
 
     def _merge_interval(self, mask, tables, link_state, obs, v2i_sum):
         def merge(new, old, batch_dim):
+            new = torch.as_tensor(new, device=self.device)
             old = torch.as_tensor(old, device=self.device)
             shape = [1] * new.dim()
             shape[batch_dim] = -1
@@ -291,37 +349,44 @@ class DigitalTwin:
 
     def _draw_interval_tables(self) -> link.IntervalTables:
         rp = self.params.radio
-        x = self.platoon.position_m
-        moved = (x - self.shadow_position_m).abs()
-        self.shadow_position_m = x.clone()
+        native = self._native
+        x = native(self.platoon.position_m)
+        moved = abs(x - native(self.shadow_position_m))
+        self.shadow_position_m = self._public(x.copy() if self._numpy else x.clone())
         g = self.generator
         n = x.shape[1]
-        self.v2v_shadow_db = channel.shadowing_update_db(
-            self.v2v_shadow_db,
+        # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends
+        v2v_shadow = channel.shadowing_update_db(
+            native(self.v2v_shadow_db),
             moved[:, :, None] + moved[:, None, :],
             rp.v2v_shadow_std_db,
             rp.v2v_decorrelation_m,
-            channel.symmetric_normal((self.batch_size, n, n), g),
+            channel.symmetric_normal((self.batch_size, n, n), g, numpy=self._numpy),
         )
-        self.v2i_shadow_db = channel.shadowing_update_db(
-            self.v2i_shadow_db,
+        v2i_shadow = channel.shadowing_update_db(
+            native(self.v2i_shadow_db),
             moved,
             rp.v2i_shadow_std_db,
             rp.v2i_decorrelation_m,
-            torch.randn(self.batch_size, n, generator=g, device=self.device),
+            native(torch.randn(self.batch_size, n, generator=g, device=self.device)),
         )
-        bs_x = channel.serving_bs_x_m(x.mean(dim=1), self.bs_offset_m, rp)
+        self.v2v_shadow_db = self._public(v2v_shadow)
+        self.v2i_shadow_db = self._public(v2i_shadow)
+        bs_x = channel.serving_bs_x_m(mean_axis(x, 1), native(self.bs_offset_m), rp)
         v2v_db, v2i_db = link.large_scale_gains_db(
             channel.v2v_pathloss_db(channel.v2v_distance_m(x), rp),
-            self.v2v_shadow_db,
+            v2v_shadow,
             channel.v2i_pathloss_db(channel.v2i_distance_m(x, bs_x, rp)),
-            self.v2i_shadow_db,
+            v2i_shadow,
             rp,
         )
         return link.build_interval_tables(v2v_db, v2i_db, rp, self.subframes_per_interval, g)
 
-    def _rra_observation_buffer(self, tables: link.IntervalTables) -> torch.Tensor:
-        """[T, B, L, D]: CSI, occupancy and bits left (filled per subframe), time, control."""
+    def _rra_observation_buffer(self, tables: link.IntervalTables):
+        """[T, B, L, D]: CSI, occupancy and bits left (filled per subframe), time, control.
+
+        A tensor, or a NumPy array on the NumPy backend.
+        """
         t, b, n_l, m = (
             self.subframes_per_interval,
             self.batch_size,
@@ -329,18 +394,25 @@ class DigitalTwin:
             self.num_subchannels,
         )
         pp = self.params.platoon
+        platoon = self._native_platoon()
         csi = link.rra_static_observation(tables, self.params.radio, self._const_torch.noise_mw)
-        gap_error, speed_error = spacing_errors(self.platoon, pp)
-        control = torch.stack(
-            [
-                gap_error / pp.gap_error_scale_m,
-                speed_error / pp.speed_error_scale_mps,
-                self.platoon.accel_mps2[:, :-1] / pp.accel_max_mps2,
-                self.platoon.command_mps2[:, 1:] / pp.accel_max_mps2,
-            ],
-            dim=-1,
-        ).clamp(-RRA_CONTROL_CLIP, RRA_CONTROL_CLIP)
-        obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
+        gap_error, speed_error = spacing_errors(platoon, pp)
+        control = clamp(
+            stack(
+                [
+                    gap_error / pp.gap_error_scale_m,
+                    speed_error / pp.speed_error_scale_mps,
+                    platoon.accel_mps2[:, :-1] / pp.accel_max_mps2,
+                    platoon.command_mps2[:, 1:] / pp.accel_max_mps2,
+                ]
+            ),
+            -RRA_CONTROL_CLIP,
+            RRA_CONTROL_CLIP,
+        )
+        if self._numpy:
+            obs = np.empty((t, b, n_l, self.rra_obs_dim), np.float32)
+        else:
+            obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
         obs[..., : 3 * m] = csi
         obs[..., 3 * m : 4 * m] = 0.0
         obs[..., 4 * m] = 1.0
@@ -420,14 +492,13 @@ class DigitalTwin:
         obs = self._rra_obs[t]
         obs[..., 3 * m : 4 * m] = self.link_state.occupancy[:, None, :] / self.num_links
         remaining = self.link_state.remaining_bits / self.params.radio.cam_size_bits
-        obs[..., 4 * m] = (
-            remaining.clip(0.0, 1.0) if self.backend == "numpy" else remaining.clamp(0.0, 1.0)
-        )
+        obs[..., 4 * m] = clamp(remaining, 0.0, 1.0)
         return obs
 
     # ------------------------------------------------------------------ interval end
-    def _delivery_subframes(self) -> torch.Tensor:
-        return torch.as_tensor(self.link_state.delay_subframes, device=self.device)
+    def _delivery_subframes(self):
+        """CAM delivery subframes [B, L] in the backend's array type."""
+        return self.link_state.delay_subframes
 
     def switch_subframe(self, perfect: bool) -> torch.Tensor:
         """When u_k takes force in this interval, [B, F] int (docs/model.md §4.5).
@@ -436,36 +507,56 @@ class DigitalTwin:
         first T−1 subframes, else T (the decision is taken at the deadline on an older CAM and
         its command takes force at the next interval).
         """
+        return self._public(self._switch_subframe(perfect))
+
+    def _switch_subframe(self, perfect: bool):
         t = self.subframes_per_interval
+        if self._numpy:
+            if perfect:
+                return np.zeros((self.batch_size, self.num_followers), np.int64)
+            delay = self._delivery_subframes()
+            return np.where(delay <= t - 1, delay, t)
         if perfect:
             return torch.zeros(
                 self.batch_size, self.num_followers, dtype=torch.long, device=self.device
             )
-        delay = self._delivery_subframes()
+        delay = torch.as_tensor(self._delivery_subframes(), device=self.device)
         return torch.where(delay <= t - 1, delay, torch.full_like(delay, t))
 
     def vehicle_observation(self, perfect: bool) -> torch.Tensor:
         """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5)."""
+        platoon = self._native_platoon()
         if perfect:
-            return perfect_observation(self.platoon, self.params.platoon)
-        switch = self.switch_subframe(perfect=False)
+            return self._public(perfect_observation(platoon, self.params.platoon))
+        native = self._native
+        switch = self._switch_subframe(perfect=False)
         usable = switch < self.subframes_per_interval
-        content = torch.where(usable[..., None], self.cam_snapshot, self.cam_held)
-        age_intervals = (self.interval[:, None] - self.cam_held_interval).float()
-        age_ms = torch.where(
-            usable, torch.zeros_like(age_intervals), age_intervals * self.interval_ms
-        )
-        return vehicle_observation(
-            self.platoon, content, switch.float() * self.subframe_ms, age_ms, self.params.platoon
+        lib = xp(switch)
+        content = lib.where(usable[..., None], native(self.cam_snapshot), native(self.cam_held))
+        age_intervals = as_float(native(self.interval)[:, None] - native(self.cam_held_interval))
+        age_ms = lib.where(usable, lib.zeros_like(age_intervals), age_intervals * self.interval_ms)
+        return self._public(
+            vehicle_observation(
+                platoon, content, as_float(switch) * self.subframe_ms, age_ms, self.params.platoon
+            )
         )
 
     def leader_accel_mps2(self, intervals: torch.Tensor) -> torch.Tensor:
-        """Leader acceleration (m/s²) in intervals ``intervals`` [B, ...] → same shape."""
+        """Leader acceleration (m/s²) in intervals ``intervals`` [B, ...] → same shape.
+
+        ``intervals`` may be a NumPy array (on a CPU twin): the result is one too.
+        """
         last = self.leader_speed_mps.shape[1] - 2
-        k = intervals.clamp(0, last)
+        k = clamp(intervals, 0, last)
         flat = k.reshape(self.batch_size, -1)
-        v = self.leader_speed_mps
-        accel = (v.gather(1, flat + 1) - v.gather(1, flat)) / self.params.platoon.control_interval_s
+        if isinstance(flat, np.ndarray):
+            v = to_numpy(self.leader_speed_mps)
+            rows = np.arange(self.batch_size)[:, None]
+            accel = (v[rows, flat + 1] - v[rows, flat]) / self.params.platoon.control_interval_s
+        else:
+            v = self.leader_speed_mps
+            ahead = v.gather(1, flat + 1)
+            accel = (ahead - v.gather(1, flat)) / self.params.platoon.control_interval_s
         return accel.reshape(intervals.shape)
 
     def finish_interval(self, commands_mps2: torch.Tensor, perfect: bool) -> IntervalRecord:
@@ -486,44 +577,54 @@ class DigitalTwin:
                 f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}"
             )
         pp = self.params.platoon
-        switch = self.switch_subframe(perfect)
-        before = self.platoon
-        u = commands_mps2.to(device=self.device, dtype=torch.float32).clamp(
-            pp.accel_min_mps2, pp.accel_max_mps2
-        )
-        after = self.integrator.integrate(before, self.leader_accel_mps2(self.interval), u, switch)
+        native, public = self._native, self._public
+        switch = self._switch_subframe(perfect)
+        before = self._native_platoon()
+        if self._numpy:
+            u = to_numpy(commands_mps2).astype(np.float32, copy=False)
+        else:
+            u = commands_mps2.to(device=self.device, dtype=torch.float32)
+        u = clamp(u, pp.accel_min_mps2, pp.accel_max_mps2)
+        interval = native(self.interval)
+        after = self.integrator.integrate(before, self.leader_accel_mps2(interval), u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
         reward = control_reward(gap_error, speed_error, u, before.command_mps2[:, 1:], pp)
         collided = gaps_m(after.position_m, pp) <= 0
-        reward = reward + collided.float() * pp.collision_penalty
+        reward = reward + as_float(collided) * pp.collision_penalty
 
+        lib = xp(u)
         if self.radio_enabled:
             delay = self._delivery_subframes()
-            mean_rate = torch.as_tensor(self._v2i_rate_sum, device=self.device) / max(
-                self.subframe, 1
-            )
+            if not self._numpy:
+                delay = torch.as_tensor(delay, device=self.device)
+            mean_rate = native(self._v2i_rate_sum) / max(self.subframe, 1)
             delivered = delay <= t
-            self.cam_held = torch.where(delivered[..., None], self.cam_snapshot, self.cam_held)
-            self.cam_held_interval = torch.where(
-                delivered, self.interval[:, None], self.cam_held_interval
+            self.cam_held = public(
+                lib.where(delivered[..., None], native(self.cam_snapshot), native(self.cam_held))
+            )
+            self.cam_held_interval = public(
+                lib.where(delivered, interval[:, None], native(self.cam_held_interval))
             )
         else:
-            delay = torch.zeros_like(switch)
-            mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+            delay = lib.zeros_like(switch)
+            if self._numpy:
+                mean_rate = np.zeros((self.batch_size, self.num_subchannels), np.float32)
+            else:
+                mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
         record = IntervalRecord(
-            interval=self.interval.clone(),
-            state_before=before,
-            state_after=after,
-            command_mps2=u,
-            switch_subframe=switch,
-            reward=reward,
-            gap_error_m=gap_error,
-            speed_error_mps=speed_error,
-            collided=collided,
-            truncated=self.interval + 1 >= self.params.episode_intervals,
-            cam_delay_subframes=delay,
-            v2i_rate_bps=mean_rate,
+            interval=public(interval.copy() if self._numpy else interval.clone()),
+            state_before=self.platoon,
+            state_after=after.torch() if self._numpy else after,
+            command_mps2=public(u),
+            switch_subframe=public(switch),
+            reward=public(reward),
+            gap_error_m=public(gap_error),
+            speed_error_mps=public(speed_error),
+            collided=public(collided),
+            truncated=public(interval + 1 >= self.params.episode_intervals),
+            cam_delay_subframes=public(delay),
+            v2i_rate_bps=public(mean_rate),
         )
-        self.platoon = after
-        self.interval = self.interval + 1
+        self.platoon = record.state_after
+        self.interval = public(interval + 1)
         return record

@@ -1,0 +1,161 @@
+"""Array helpers that let one function run on torch tensors or on NumPy arrays.
+
+The batched core works on torch tensors; the single-scenario fast path of the PettingZoo
+environments (``DigitalTwin(backend="numpy")``) runs the same functions on NumPy arrays, where
+an operation on a handful of numbers costs a fraction of torch's dispatch. Code written with
+these helpers performs the same float32 operations in the same order on either backend, so the
+two give bit-identical results. Arithmetic, comparisons, ``abs`` and clamps are exactly rounded
+in both libraries; the transcendental functions (:func:`log10`, :func:`exp`, :func:`sqrt`,
+:func:`exp10`) are not (NumPy's and torch's vectorised implementations differ in the last bit
+for some inputs), so on NumPy arrays they are evaluated by torch on a shared-memory view.
+Random draws always come from the twin's torch generator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import TypeAlias
+
+import numpy as np
+import torch
+
+Array: TypeAlias = torch.Tensor | np.ndarray
+
+
+@contextmanager
+def single_intra_op_thread() -> Iterator[None]:
+    """Run torch's CPU kernels on one intra-op thread inside the block; restore the setting.
+
+    The NumPy path hands torch a few arrays of one scenario (random draws, a log10 over the
+    interval's tables). torch splits even ~1,000-element kernels across its intra-op threads,
+    and waking a second thread costs tens to hundreds of µs when the other core is busy; one
+    thread is always the faster choice at this size. ``torch.set_num_threads`` is
+    process-wide, so other Python threads running torch meanwhile also see one thread.
+    """
+    threads = torch.get_num_threads()
+    if threads == 1:
+        yield
+        return
+    torch.set_num_threads(1)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(threads)
+
+
+def xp(x: Array):
+    """The array module of ``x``: ``numpy`` for NumPy arrays, else ``torch``."""
+    return np if isinstance(x, np.ndarray) else torch
+
+
+def clamp(x: Array, low: float | None = None, high: float | None = None) -> Array:
+    """``torch.clamp`` on either backend (NaN propagates, like torch)."""
+    if isinstance(x, np.ndarray):
+        if low is not None:
+            x = np.maximum(x, low)
+        if high is not None:
+            x = np.minimum(x, high)
+        return x
+    return x.clamp(low, high)
+
+
+def _torch_on_numpy(x: np.ndarray, fn) -> np.ndarray:
+    return fn(to_torch(x)).numpy()
+
+
+def log10(x: Array) -> Array:
+    return _torch_on_numpy(x, torch.log10) if isinstance(x, np.ndarray) else torch.log10(x)
+
+
+def exp(x: Array) -> Array:
+    return _torch_on_numpy(x, torch.exp) if isinstance(x, np.ndarray) else torch.exp(x)
+
+
+def sqrt(x: Array) -> Array:
+    return _torch_on_numpy(x, torch.sqrt) if isinstance(x, np.ndarray) else torch.sqrt(x)
+
+
+def exp10(x: Array) -> Array:
+    """10 ** x (``torch.pow(10.0, x)``)."""
+    if isinstance(x, np.ndarray):
+        return torch.pow(10.0, to_torch(x)).numpy()
+    return torch.pow(10.0, x)
+
+
+def stack(arrays: list[Array], axis: int = -1) -> Array:
+    first = arrays[0]
+    if not isinstance(first, np.ndarray):
+        return torch.stack(arrays, dim=axis)
+    if axis != -1 or any(a.shape != first.shape or a.dtype != first.dtype for a in arrays):
+        return np.stack(arrays, axis=axis)
+    out = np.empty((*first.shape, len(arrays)), first.dtype)  # np.stack without its overhead
+    for i, a in enumerate(arrays):
+        out[..., i] = a
+    return out
+
+
+def cat(arrays: list[Array], axis: int = -1) -> Array:
+    if isinstance(arrays[0], np.ndarray):
+        return np.concatenate(arrays, axis=axis)
+    return torch.cat(arrays, dim=axis)
+
+
+def as_float(x: Array) -> Array:
+    """Cast to float32 (``Tensor.float()``; also for bool masks)."""
+    if isinstance(x, np.ndarray):
+        return x.astype(np.float32)
+    return x.float()
+
+
+def cast_like(x: Array, like: Array) -> Array:
+    """Cast ``x`` to the dtype of ``like`` (``x.to(like.dtype)``)."""
+    if isinstance(x, np.ndarray):
+        return x.astype(like.dtype, copy=False)
+    return x.to(like.dtype)
+
+
+def repeat_rows(x: Array, times: int) -> Array:
+    """Repeat a [B, ...] array ``times`` times along dim 0 (``Tensor.repeat(times, 1, ...)``)."""
+    if isinstance(x, np.ndarray):
+        return np.concatenate((x,) * times, axis=0)
+    return x.repeat(times, *((1,) * (x.dim() - 1)))
+
+
+def sum_axis(x: Array, axis: int) -> Array:
+    """``x.sum(axis)`` (``np.add.reduce`` is what ``ndarray.sum`` runs, without its wrapper)."""
+    if isinstance(x, np.ndarray):
+        return np.add.reduce(x, axis=axis)
+    return x.sum(dim=axis)
+
+
+def mean_axis(x: Array, axis: int) -> Array:
+    """``x.mean(axis)``; on NumPy what ``ndarray.mean`` computes (sum, then divide by the
+    count), without its wrapper."""
+    if isinstance(x, np.ndarray):
+        return np.add.reduce(x, axis=axis) / x.shape[axis]
+    return x.mean(dim=axis)
+
+
+def to_numpy(x: torch.Tensor | np.ndarray) -> np.ndarray:
+    """A NumPy view of a CPU tensor (no copy); arrays pass through."""
+    if isinstance(x, np.ndarray):
+        return x
+    try:
+        return x.numpy()  # the common case: a CPU tensor that needs no grad
+    except (RuntimeError, TypeError):
+        return x.detach().cpu().numpy()
+
+
+def to_torch(x: np.ndarray | torch.Tensor) -> torch.Tensor:
+    """A CPU tensor sharing the array's memory (no copy); tensors pass through."""
+    if isinstance(x, torch.Tensor):
+        return x
+    if not isinstance(x, np.ndarray):
+        return torch.as_tensor(x)
+    if not x.flags.writeable:
+        x = np.array(x)  # torch shares only writeable memory
+    try:
+        return torch.from_numpy(x)
+    except ValueError:  # negative strides
+        return torch.from_numpy(np.array(x))
