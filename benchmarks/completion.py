@@ -26,13 +26,11 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import math
 import os
 import platform
 import shlex
 import sys
-import tempfile
 import time
 from pathlib import Path
 
@@ -40,6 +38,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import (
     CAM_ACCEL,
@@ -229,23 +228,6 @@ def print_report(rows: list[dict]) -> None:
     Console(width=180).print(t)
 
 
-def write_json_atomic(path: Path, payload: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, indent=2)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def main(argv=None) -> int:
     args = parse_args(argv)
     torch.set_num_threads(args.threads)
@@ -305,7 +287,7 @@ def main(argv=None) -> int:
         },
         "results": rows,
     }
-    write_json_atomic(args.out, payload)
+    atomic_write_json(args.out, payload)
     print(f"\nwrote {args.out}")
     return 0
 

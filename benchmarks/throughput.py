@@ -29,17 +29,17 @@ from __future__ import annotations
 
 import argparse
 import datetime as dt
-import json
 import os
 import platform
 import shlex
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+
+from vdtn_marl.runs import atomic_write_json
 
 TARGET_ENV_SUBFRAMES_PER_S = 10_000.0
 TARGET_CORE_AGENT_STEPS_PER_S = 1_000_000.0
@@ -278,23 +278,6 @@ def print_report(results: list[dict], targets: list[dict]) -> None:
         console.print(line, style="green" if t["met"] else "red", markup=False, highlight=False)
 
 
-def write_json_atomic(path: Path, payload: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
-        with os.fdopen(fd, "w") as f:
-            json.dump(payload, f, indent=2)
-            f.write("\n")
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-
-
 def _summarise(runs: list[dict]) -> dict:
     """The median run (the lower one for an even count), with every run's rate kept."""
     rates = [r["subframes_per_s"] for r in runs]
@@ -358,7 +341,7 @@ def main(argv=None) -> int:
         "targets": targets,
         "results": results,
     }
-    write_json_atomic(args.out, payload)
+    atomic_write_json(args.out, payload)
     print(f"\nwrote {args.out}")
     return 0
 

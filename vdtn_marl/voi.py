@@ -57,6 +57,13 @@ def _numpy_path(twin: DigitalTwin, policy: Policy) -> bool:
     return twin.backend == "numpy" and _is_linear_cacc(policy)
 
 
+def _check_rollout(horizon_intervals: int, discount: float) -> None:
+    if horizon_intervals < 1:
+        raise ValueError(f"horizon_intervals={horizon_intervals!r} must be >= 1")
+    if not 0.0 <= discount <= 1.0:
+        raise ValueError(f"discount={discount!r} is outside [0, 1]")
+
+
 def discounted_rollout(
     twin: DigitalTwin,
     state: PlatoonState,
@@ -287,10 +294,7 @@ class RolloutValue:
         horizon_intervals: int = 10,
         discount: float = 0.99,
     ):
-        if horizon_intervals < 1:
-            raise ValueError(f"horizon_intervals={horizon_intervals!r} must be >= 1")
-        if not 0.0 <= discount <= 1.0:
-            raise ValueError(f"discount={discount!r} is outside [0, 1]")
+        _check_rollout(horizon_intervals, discount)
         self.reference_policy = reference_policy
         self.horizon_intervals = horizon_intervals
         self.discount = discount
@@ -327,10 +331,7 @@ class RolloutIVoIEstimator:
         discount: float = 0.99,
         terminal_value: Policy | None = None,
     ):
-        if horizon_intervals < 1:
-            raise ValueError(f"horizon_intervals={horizon_intervals!r} must be >= 1")
-        if not 0.0 <= discount <= 1.0:
-            raise ValueError(f"discount={discount!r} is outside [0, 1]")
+        _check_rollout(horizon_intervals, discount)
         self.reference_policy = reference_policy
         self.horizon_intervals = horizon_intervals
         self.discount = discount

@@ -122,6 +122,30 @@ def _scaler(spec: Composite, group: str, drop_features: Sequence[int]) -> Observ
     return ObservationScaler(low, high, mask)
 
 
+def _group_mlp(
+    n_inputs: int,
+    n_outputs: int,
+    n_agents: int,
+    centralised: bool,
+    share_params: bool,
+    depth: int,
+    num_cells: int,
+    device: torch.device | str,
+) -> MultiAgentMLP:
+    """The tanh MultiAgentMLP every actor and critic of a group is built on."""
+    return MultiAgentMLP(
+        n_inputs,
+        n_outputs,
+        n_agents,
+        centralized=centralised,
+        share_params=share_params,
+        device=device,
+        depth=depth,
+        num_cells=num_cells,
+        activation_class=nn.Tanh,
+    )
+
+
 def group_shape(spec: Composite, group: str) -> tuple[int, int]:
     """(number of agents, observation size) of ``group`` in a batched observation spec."""
     shape = spec[group, "observation"].shape
@@ -152,17 +176,7 @@ def make_actor(
     scaler = _scaler(observation_spec, group, drop_features).to(device)
     if isinstance(action, CategoricalSpec):
         n_out = int(action.space.n)
-        body = MultiAgentMLP(
-            n_obs,
-            n_out,
-            n_agents,
-            centralized=False,
-            share_params=share_params,
-            device=device,
-            depth=depth,
-            num_cells=num_cells,
-            activation_class=nn.Tanh,
-        )
+        body = _group_mlp(n_obs, n_out, n_agents, False, share_params, depth, num_cells, device)
         module = TensorDictModule(
             nn.Sequential(scaler, body),
             in_keys=[(group, "observation")],
@@ -183,17 +197,7 @@ def make_actor(
     high = action.space.high.reshape(-1)[0].item()
     if prior is not None and n_act != 1:
         raise ValueError(f"a policy prior needs one action per agent, group {group!r} has {n_act}")
-    body = MultiAgentMLP(
-        n_obs,
-        n_act,
-        n_agents,
-        centralized=False,
-        share_params=share_params,
-        device=device,
-        depth=depth,
-        num_cells=num_cells,
-        activation_class=nn.Tanh,
-    )
+    body = _group_mlp(n_obs, n_act, n_agents, False, share_params, depth, num_cells, device)
     if prior is not None:
         _zero_last_layer(body)
     net = nn.Sequential(
@@ -229,17 +233,7 @@ def make_critic(
     """State-value network of ``group``; writes ``(group, "state_value")`` [..., n_agents, 1]."""
     n_agents, n_obs = group_shape(observation_spec, group)
     scaler = _scaler(observation_spec, group, ()).to(device)
-    body = MultiAgentMLP(
-        n_obs,
-        1,
-        n_agents,
-        centralized=centralised,
-        share_params=share_params,
-        device=device,
-        depth=depth,
-        num_cells=num_cells,
-        activation_class=nn.Tanh,
-    )
+    body = _group_mlp(n_obs, 1, n_agents, centralised, share_params, depth, num_cells, device)
     return TensorDictModule(
         nn.Sequential(scaler, body),
         in_keys=[(group, "observation")],
