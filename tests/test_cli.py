@@ -216,6 +216,8 @@ BAD_CONFIGS = [
     (["experiment.control_iterations=-5"], "experiment.control_iterations=-5"),
     (["experiment.eval_episodes=0"], "experiment.eval_episodes=0"),
     (["algo.num_envs=0"], "algo.num_envs=0"),
+    (["algo.lr_schedule=cosine"], "algo.lr_schedule='cosine'"),
+    (["algo.validate_every=-1"], "algo.validate_every=-1"),
     (["scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.model.foo=1"], "scenario.model.foo=1"),
@@ -344,7 +346,7 @@ def test_group_options_as_documented():
     assert set(cli.group_options("rra")) == {
         "jocc", "drra", "throughput", "random", "round_robin", "greedy",
     }  # fmt: skip
-    assert set(cli.group_options("control")) == {"learned", "cacc", "oracle"}
+    assert set(cli.group_options("control")) == {"learned", "cacc", "oracle", "causal_mpc"}
     assert set(cli.group_options("experiment")) == {"smoke", "default", "paper"}
     assert {"basic", "joblib", "submitit_slurm", "ray"} <= set(cli.group_options("hydra/launcher"))
 

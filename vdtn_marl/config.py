@@ -17,10 +17,11 @@ from typing import Any
 from vdtn_marl.sim.params import ConfigError, TwinParams
 
 ALGOS = ("mappo", "ippo")
-CONTROLS = ("learned", "cacc", "oracle")
+CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
 RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
 LEARNED_RRA = ("jocc", "drra", "throughput")
 IVOI_ESTIMATORS = ("td", "rollout")
+LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
 COMPLETIONS = ("none", "hold", "kalman", "learned")
 
@@ -66,6 +67,7 @@ class AlgoConfig:
     depth: int = 2  # hidden layers
     num_cells: int = 64  # units per hidden layer
     lr: float = 3e-4
+    lr_schedule: str = "constant"  # linear: decays to 0 over each training stage
     gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)
     rra_gamma: float = 0.99  # RRA agents: discount per subframe (horizon ≈ 100 ms)
     lmbda: float = 0.95
@@ -80,6 +82,9 @@ class AlgoConfig:
     rollout_steps: int = 200  # control intervals per scenario per batch: whole 10 s episodes
     rra_num_envs: int = 64  # B scenarios collected in parallel (RRA agents)
     rra_rollout_steps: int = 100  # subframes per scenario per collected batch (RRA agents)
+    # every N iterations of a stage, score the deterministic policy on fixed validation
+    # scenarios and keep the best actor and critic for the stage's end (0: keep the last)
+    validate_every: int = 0
 
     @property
     def centralised_critic(self) -> bool:
@@ -88,7 +93,8 @@ class AlgoConfig:
 
 @dataclass
 class ControlConfig:
-    """Who drives the followers: a learned policy, linear CACC, or the oracle (MPC)."""
+    """Who drives the followers: a learned policy, linear CACC, the oracle (MPC with the
+    leader's future) or the causal MPC (without it)."""
 
     name: str = "learned"
     augmentation: bool = True  # π̃ sees CAM delay/age and its previous command
@@ -173,6 +179,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     """Check every key of ``cfg``; raise :class:`ConfigError` naming key, value and range."""
     s, a, c, r, e = cfg.scenario, cfg.algo, cfg.control, cfg.rra, cfg.experiment
     _choice("algo.name", a.name, ALGOS)
+    _choice("algo.lr_schedule", a.lr_schedule, LR_SCHEDULES)
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
     if c.completion == "learned" and not c.completion_predictor:
@@ -205,6 +212,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         "rra_rollout_steps",
     ):
         _positive_int(f"algo.{key}", getattr(a, key))
+    _positive_int("algo.validate_every", a.validate_every, low=0)
     _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
     _real("algo.gamma", a.gamma, 0.0, 1.0)
     _real("algo.rra_gamma", a.rra_gamma, 0.0, 1.0)

@@ -260,17 +260,45 @@ def test_oracle_bind_ignores_observation_and_uses_switch():
     assert not torch.allclose(got, oracle(radio_twin), atol=1e-4)  # the switch matters
 
 
+def test_causal_mpc_ignores_the_leader_future_and_the_oracle_uses_it():
+    twin = DigitalTwin(TwinParams(), batch_size=2, seed=4, radio=False)
+    cacc = CACCController(twin.params.platoon)
+    for _ in range(3):
+        twin.finish_interval(cacc(twin.vehicle_observation(perfect=True)), perfect=True)
+        twin.begin_interval()
+    true_future = twin.leader_accel_mps2
+
+    def braking_future(intervals):  # same present, a hard brake 10 intervals ahead
+        accel = true_future(intervals)
+        return torch.where(intervals >= twin.interval[:, None] + 10, -3.0, accel)
+
+    commands = {}
+    for name in ("oracle", "causal_mpc"):
+        for future in ("true", "braking"):
+            twin.leader_accel_mps2 = true_future if future == "true" else braking_future
+            controller = make_control_baseline(name, twin, horizon_intervals=40, iterations=10)
+            commands[name, future] = controller(twin.vehicle_observation(perfect=True))
+    twin.leader_accel_mps2 = true_future
+    torch.testing.assert_close(commands["causal_mpc", "true"], commands["causal_mpc", "braking"])
+    assert not torch.allclose(commands["oracle", "true"], commands["oracle", "braking"], atol=1e-3)
+    with pytest.raises(ValueError, match="leader_accel_decay_s"):
+        OracleController(leader_preview=False, leader_accel_decay_s=0.0)
+
+
 # ---------------------------------------------------------------------- registries
 def test_factories_build_the_named_baselines():
     params = TwinParams()
     assert set(RRA_BASELINES) == {"random", "round_robin", "greedy"}
-    assert set(CONTROL_BASELINES) == {"cacc", "oracle"}
+    assert set(CONTROL_BASELINES) == {"cacc", "oracle", "causal_mpc"}
     assert isinstance(make_rra_baseline("random", params, seed=1), RandomRRAPolicy)
     rr = make_rra_baseline("round_robin", params)
     assert isinstance(rr, RoundRobinRRAPolicy) and rr.power_level == 0
     assert isinstance(make_rra_baseline("greedy"), GreedyRRAPolicy)
     assert isinstance(make_control_baseline("cacc", params), CACCController)
     assert isinstance(make_control_baseline("oracle", params), OracleController)
+    causal = make_control_baseline("causal_mpc", params)
+    assert isinstance(causal, OracleController) and not causal.leader_preview
+    assert make_control_baseline("oracle", params).leader_preview
 
 
 @pytest.mark.parametrize(

@@ -90,8 +90,13 @@ def _actor_params(loop: JointOptimisation) -> list[torch.Tensor]:
     return [p.detach().clone() for p in loop.pi_star.actor.parameters()]
 
 
-def test_resume_continues_bit_for_bit(tmp_path, monkeypatch):
-    cfg = tiny_config()
+@pytest.mark.parametrize(
+    "algo",
+    [TINY_ALGO, replace(TINY_ALGO, lr_schedule="linear", validate_every=2)],
+    ids=["constant", "linear-validated"],
+)
+def test_resume_continues_bit_for_bit(tmp_path, monkeypatch, algo):
+    cfg = tiny_config(algo=algo)
     straight = JointOptimisation(cfg, tmp_path / "straight", task="control")
     straight.run()
     reference = _actor_params(straight)
@@ -122,6 +127,43 @@ def test_resume_continues_bit_for_bit(tmp_path, monkeypatch):
     assert len(straight_rows) == len(resumed_rows) == 1 + TINY_EXPERIMENT.control_iterations
     strip_seconds = [row.rsplit(",", 1)[0] for row in straight_rows]
     assert strip_seconds == [row.rsplit(",", 1)[0] for row in resumed_rows]
+
+
+def test_linear_schedule_and_validation_keep_the_best_iterate(monkeypatch):
+    algo = replace(TINY_ALGO, lr_schedule="linear", validate_every=2, lr=1e-3)
+    trainer = PPOTrainer(VDTNTorchRLEnv("control", batch_size=8, seed=0), "vehicle", algo, seed=0)
+    scores = iter([0.5, 2.0, 1.0])  # validated after iterations 1, 3 and 4 (the stage's last)
+    monkeypatch.setattr(PPOTrainer, "validation_return", lambda self: next(scores))
+    assert trainer.learning_rate() == pytest.approx(1e-3)  # outside a stage: constant
+    trainer.begin_stage(5)
+    snapshots, rates, validated = [], [], []
+    for _ in range(5):
+        stats = trainer.train_iteration()
+        rates.append(stats.lr)
+        validated.append(stats.validation_return)
+        snapshots.append([p.detach().clone() for p in trainer.actor.parameters()])
+    assert rates == pytest.approx([1e-3, 8e-4, 6e-4, 4e-4, 2e-4])
+    assert validated[0] != validated[0] and validated[2] != validated[2]  # NaN: not scored
+    assert validated[1::2] == [0.5, 2.0] and validated[4] == 1.0
+    assert trainer.finish_stage() == {"best_iteration": 3, "best_return": 2.0}
+    kept = [p.detach() for p in trainer.actor.parameters()]
+    assert all(torch.equal(a, b) for a, b in zip(kept, snapshots[3], strict=True))
+    assert not all(torch.equal(a, b) for a, b in zip(kept, snapshots[4], strict=True))
+    assert trainer.finish_stage() == {"best_iteration": None, "best_return": None}
+    with pytest.raises(ValueError, match="stage iterations=0"):
+        trainer.begin_stage(0)
+
+
+def test_validation_return_is_repeatable_and_deterministic():
+    trainer = PPOTrainer(
+        VDTNTorchRLEnv("control", batch_size=4, seed=0), "vehicle", TINY_ALGO, seed=3
+    )
+    trainer.fit_observation_scaling()
+    first = trainer.validation_return()
+    trainer.collect()  # training scenarios in between change nothing
+    assert trainer.validation_return() == first
+    training_reward = trainer.collect(iteration=0).get(("next", "vehicle", "reward")).mean()
+    assert first != float(training_reward)  # not the stochastic policy on the training scenarios
 
 
 def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):

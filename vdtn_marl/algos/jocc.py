@@ -174,8 +174,9 @@ class JointOptimisation:
                 miss_penalty=rra.miss_penalty,
                 **completion_kw,
             )
-            if control.name == "oracle":
-                rra_env.control_module.policy = make_control_baseline("oracle", rra_env.twin)
+            policy = rra_env.control_module.policy
+            if hasattr(policy, "bind"):  # oracle, causal_mpc: they read the twin's true state
+                rra_env.control_module.policy = policy.bind(rra_env.twin)
             self.rra = PPOTrainer(
                 rra_env,
                 "rra",
@@ -285,6 +286,7 @@ class JointOptimisation:
             self.rra_slot.policy = self._rra_policy()
         if self.position["stage_start"] is None:
             self.position["stage_start"] = trainer.iteration
+            trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
         every = self.cfg.experiment.checkpoint_every
         while trainer.iteration < end:
@@ -296,6 +298,9 @@ class JointOptimisation:
             bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
             if every and trainer.iteration < end and trainer.iteration % every == 0:
                 self.save()
+        selected = trainer.finish_stage()["best_iteration"]
+        if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
+            self.position.setdefault("selected_iterations", {})[stage] = selected
 
     def evaluate(self) -> dict[str, Any]:
         """The ``evaluate`` stage: metrics of the acting system, EVoI against π*."""
@@ -456,6 +461,8 @@ class JointOptimisation:
             "scenario": self.cfg.scenario.name,
             "iterations": self.position["iteration"],
             "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
+            # with algo.validate_every: the trainer iteration whose weights each stage kept
+            "selected_iterations": dict(self.position.get("selected_iterations", {})),
             "seconds": seconds,
             "resumed": resumed,
             **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},

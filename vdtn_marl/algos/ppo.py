@@ -6,6 +6,14 @@ Built from TorchRL parts: :func:`~vdtn_marl.algos.networks.make_actor` /
 environment's own ``rollout`` (the batched face is already vectorised over B scenarios, so a
 collector would add nothing but a copy).
 
+Training stages (:meth:`PPOTrainer.begin_stage` … :meth:`PPOTrainer.finish_stage`) add two
+switches of :class:`~vdtn_marl.config.AlgoConfig`: ``lr_schedule="linear"`` anneals the
+learning rate linearly to zero over the stage, and ``validate_every=N`` scores the
+deterministic policy every N iterations (and at the stage's last) on fixed validation
+scenarios, seeded apart from the training and evaluation ones, and hands back the best-scoring
+actor and critic at the end of the stage (model selection; the last iterate of PPO can be
+much worse than an earlier one).
+
 Reproducibility: iteration ``k`` collects from freshly reset scenarios seeded with
 ``seed_for(k)``; action sampling and minibatch shuffles use the global torch RNG, whose state
 goes into :meth:`PPOTrainer.state_dict`. A run resumed from a checkpoint therefore continues
@@ -14,6 +22,7 @@ bit for bit on the same device.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -30,6 +39,10 @@ from vdtn_marl.config import AlgoConfig
 #: Iteration seeds are spread so that no two iterations (or two runs with nearby seeds) share
 #: scenarios: seed_for(k) = seed · SEED_STRIDE + k.
 SEED_STRIDE = 1_000_003
+#: ``seed_for`` offsets of the scaling-fit rollout and of the validation scenarios: never a
+#: training iteration's.
+SCALING_ITERATION = SEED_STRIDE - 1
+VALIDATION_ITERATION = SEED_STRIDE - 2
 
 
 @dataclass
@@ -43,6 +56,8 @@ class IterationStats:
     loss_objective: float
     loss_critic: float
     loss_entropy: float
+    lr: float  # learning rate of the iteration's update
+    validation_return: float  # of the deterministic policy after the update (NaN: not scored)
     seconds: float
 
     def row(self, prefix: str) -> dict:
@@ -127,6 +142,7 @@ class PPOTrainer:
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo.lr)
         self.iteration = 0
         self.scaling_fitted = False
+        self.stage: dict | None = None  # see begin_stage
 
     # ------------------------------------------------------------------ data
     def seed_for(self, iteration: int) -> int:
@@ -149,7 +165,7 @@ class PPOTrainer:
     def fit_observation_scaling(self) -> None:
         """Standardise observations with statistics of one rollout of the initial policy
         (scenarios seeded apart from the training iterations)."""
-        data = self.collect(iteration=SEED_STRIDE - 1)
+        data = self.collect(iteration=SCALING_ITERATION)
         observations = data.get((self.group, "observation"))
         for scaler in scalers(self.actor) + scalers(self.critic):
             scaler.fit_(observations)
@@ -184,6 +200,61 @@ class PPOTrainer:
                 steps += 1
         return {key: value / max(steps, 1) for key, value in sums.items()}
 
+    def validation_return(self) -> float:
+        """Mean reward (per agent and step) of the deterministic policy on the validation
+        scenarios: ``rollout_steps`` steps of ``num_envs`` scenarios seeded with
+        ``seed_for(VALIDATION_ITERATION)``, the same at every call."""
+        self.env.set_seed(self.seed_for(VALIDATION_ITERATION))
+        with torch.no_grad(), set_interaction_type(InteractionType.DETERMINISTIC):
+            data = self.env.rollout(
+                self.rollout_steps,
+                policy=self.actor,
+                tensordict=self.env.reset(),
+                auto_reset=False,
+                break_when_any_done=False,
+            )
+        return float(data.get(("next", self.group, "reward")).mean())
+
+    # ------------------------------------------------------------------ stages
+    def begin_stage(self, iterations: int) -> None:
+        """Start a training stage of ``iterations`` iterations from the current one (for the
+        learning-rate schedule and the validation of ``algo.lr_schedule``/``validate_every``)."""
+        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 1:
+            raise ValueError(f"stage iterations={iterations!r} must be an integer >= 1")
+        self.stage = {
+            "start": self.iteration,
+            "end": self.iteration + iterations,
+            "best_return": None,
+            "best_iteration": None,
+            "best_state": None,
+        }
+
+    def learning_rate(self) -> float:
+        """Learning rate of the current iteration's update: ``algo.lr``, or with
+        ``lr_schedule="linear"`` inside a stage, ``algo.lr · (end − k) / (end − start)``."""
+        if self.algo.lr_schedule == "constant" or self.stage is None:
+            return self.algo.lr
+        start, end = self.stage["start"], self.stage["end"]
+        return self.algo.lr * max(end - self.iteration, 1) / (end - start)
+
+    def _validate_now(self) -> bool:
+        every = self.algo.validate_every
+        if not every or self.stage is None:
+            return False
+        done = self.iteration + 1 - self.stage["start"]  # iterations of the stage after this one
+        return done % every == 0 or self.iteration + 1 >= self.stage["end"]
+
+    def finish_stage(self) -> dict:
+        """End the stage; with validation, load the best-scoring actor and critic (the
+        optimiser state stays that of the last iterate). Returns ``{"best_iteration",
+        "best_return"}`` (None without validation). Calling it again is a no-op."""
+        stage, self.stage = self.stage, None
+        if stage is None or stage["best_state"] is None:
+            return {"best_iteration": None, "best_return": None}
+        self.actor.load_state_dict(stage["best_state"]["actor"])
+        self.critic.load_state_dict(stage["best_state"]["critic"])
+        return {"best_iteration": stage["best_iteration"], "best_return": stage["best_return"]}
+
     def train_iteration(self) -> IterationStats:
         """Collect one batch and update on it; returns the iteration's statistics."""
         if not self.scaling_fitted:
@@ -192,13 +263,31 @@ class PPOTrainer:
         data = self.collect()
         reward = data.get(("next", self.group, "reward"))
         done = data.get(("next", "done"))
+        lr = self.learning_rate()
+        for group in self.optimizer.param_groups:
+            group["lr"] = lr
         losses = self.update(data)
+        validation = float("nan")
+        if self._validate_now():
+            validation = self.validation_return()
+            best = self.stage["best_return"]
+            if best is None or validation > best:
+                self.stage.update(
+                    best_return=validation,
+                    best_iteration=self.iteration,
+                    best_state={
+                        "actor": copy.deepcopy(self.actor.state_dict()),
+                        "critic": copy.deepcopy(self.critic.state_dict()),
+                    },
+                )
         stats = IterationStats(
             iteration=self.iteration,
             frames=int(data.numel()),
             reward_mean=float(reward.mean()),
             episodes_done=int(done.sum()),
             seconds=time.perf_counter() - began,
+            lr=lr,
+            validation_return=validation,
             **losses,
         )
         self.iteration += 1
@@ -212,6 +301,7 @@ class PPOTrainer:
             "optimizer": self.optimizer.state_dict(),
             "iteration": self.iteration,
             "scaling_fitted": self.scaling_fitted,
+            "stage": copy.deepcopy(self.stage),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -220,6 +310,7 @@ class PPOTrainer:
         self.optimizer.load_state_dict(state["optimizer"])
         self.iteration = int(state["iteration"])
         self.scaling_fitted = bool(state["scaling_fitted"])
+        self.stage = copy.deepcopy(state.get("stage"))
 
 
 class ActorPolicy:
