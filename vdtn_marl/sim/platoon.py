@@ -55,8 +55,12 @@ class PlatoonState:
     accel_mps2: torch.Tensor  # [B, N]
     command_mps2: torch.Tensor  # [B, N]
 
+    def _map(self, fn) -> PlatoonState:
+        """A state whose every field is ``fn(field)``."""
+        return PlatoonState(*(fn(getattr(self, f.name)) for f in fields(self)))
+
     def clone(self) -> PlatoonState:
-        return PlatoonState(*(getattr(self, f.name).clone() for f in fields(self)))
+        return self._map(lambda field: field.clone())
 
     def where(self, mask: torch.Tensor, other: PlatoonState) -> PlatoonState:
         """Per scenario: ``other`` where ``mask`` [B] is True, else self."""
@@ -67,30 +71,15 @@ class PlatoonState:
 
     def repeat(self, times: int) -> PlatoonState:
         """Repeat every scenario ``times`` times along the batch (branch-major: [times·B])."""
-        return PlatoonState(
-            repeat_rows(self.position_m, times),
-            repeat_rows(self.speed_mps, times),
-            repeat_rows(self.accel_mps2, times),
-            repeat_rows(self.command_mps2, times),
-        )
+        return self._map(lambda field: repeat_rows(field, times))
 
     def numpy(self) -> PlatoonState:
         """The same state as NumPy arrays (views of CPU tensors, no copy)."""
-        return PlatoonState(
-            to_numpy(self.position_m),
-            to_numpy(self.speed_mps),
-            to_numpy(self.accel_mps2),
-            to_numpy(self.command_mps2),
-        )
+        return self._map(to_numpy)
 
     def torch(self) -> PlatoonState:
         """The same state as torch tensors (NumPy arrays are shared, not copied)."""
-        return PlatoonState(
-            to_torch(self.position_m),
-            to_torch(self.speed_mps),
-            to_torch(self.accel_mps2),
-            to_torch(self.command_mps2),
-        )
+        return self._map(to_torch)
 
 
 def gaps_m(position_m: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
