@@ -12,7 +12,10 @@ Figures:
   (model-predictive over the known leader trace) and of the causal MPC (the same optimiser
   without the leader's future), and π*'s gap to the oracle in percent (target: within 10%) and
   to the causal MPC. The oracle–causal-MPC gap is the value of previewing the leader trace,
-  which π* (it observes only the present) cannot learn.
+  which π* (it observes only the present) cannot learn;
+- the value of preview: the control cost of the same MPC when it knows only the next
+  ``--preview-s`` seconds of the leader trace (0 s is the causal MPC, the whole 6 s horizon
+  the oracle).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from pathlib import Path
 import torch
 
 from vdtn_marl import __version__
-from vdtn_marl.algos.baselines import make_control_baseline
+from vdtn_marl.algos.baselines import ORACLE_HORIZON_INTERVALS, make_control_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.config import AlgoConfig, ScenarioConfig
@@ -54,6 +57,31 @@ def frames_per_second(trainer: PPOTrainer, iterations: int) -> dict[str, float]:
     return {"frames_per_s": frames / total_s, "collect_frames_per_s": frames / collect_s}
 
 
+def _preview_intervals(text: str, interval_s: float) -> dict[float, int]:
+    """Parse ``--preview-s`` ("0.25,0.5") into {preview s: whole control intervals}."""
+    previews = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        preview_s = float(item)
+        intervals = round(preview_s / interval_s)
+        horizon_s = ORACLE_HORIZON_INTERVALS * interval_s
+        if (
+            not 0 < intervals < ORACLE_HORIZON_INTERVALS
+            or abs(intervals * interval_s - preview_s) > 1e-9
+        ):
+            raise SystemExit(
+                f"--preview-s {item!r} must be a multiple of {interval_s * 1000:g} ms "
+                f"in (0, {horizon_s:g}) s (the oracle's horizon)"
+            )
+        previews[preview_s] = intervals
+    return previews
+
+
+def _costs(result) -> dict[str, float]:
+    """The control-cost figures of one evaluation."""
+    keys = ("control_cost", "gap_error_abs_m", "speed_error_abs_mps", "collision_rate")
+    return {key: result.metrics[key] for key in keys}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--batch", type=int, default=256, help="scenarios B of the batched face")
@@ -65,6 +93,11 @@ def main(argv: list[str] | None = None) -> int:
         help="π*: keep the best of the iterates validated every N iterations (0: the last)",
     )
     parser.add_argument("--lr-schedule", choices=("constant", "linear"), default="constant")
+    parser.add_argument(
+        "--preview-s",
+        default="0.25,0.5,1,2",
+        help="comma-separated leader preview times (s) of the MPC rows ('' for none)",
+    )
     parser.add_argument("--fps-iterations", type=int, default=5)
     parser.add_argument("--episodes", type=int, default=32, help="evaluation scenarios")
     parser.add_argument("--intervals", type=int, default=200, help="evaluation intervals")
@@ -78,6 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     rows: dict[str, object] = {}
+    previews = _preview_intervals(args.preview_s, TwinParams().platoon.control_interval_s)
 
     algo = AlgoConfig(num_envs=args.batch, rollout_steps=50, minibatch_size=4096, epochs=4)
     env = VDTNTorchRLEnv("control", batch_size=args.batch, device=args.device, seed=args.seed)
@@ -137,12 +171,12 @@ def main(argv: list[str] | None = None) -> int:
     ):
         began_eval = time.perf_counter()
         result = evaluate_system(params, policy, None, **common)
-        costs[name] = {
-            "control_cost": result.metrics["control_cost"],
-            "gap_error_abs_m": result.metrics["gap_error_abs_m"],
-            "speed_error_abs_mps": result.metrics["speed_error_abs_mps"],
-            "collision_rate": result.metrics["collision_rate"],
-            "eval_seconds": time.perf_counter() - began_eval,
+        costs[name] = {**_costs(result), "eval_seconds": time.perf_counter() - began_eval}
+    for preview_s, intervals in previews.items():
+        mpc = make_control_baseline("oracle", params, preview_intervals=intervals)
+        costs[f"mpc_preview_{preview_s:g}s"] = {
+            "preview_s": preview_s,
+            **_costs(evaluate_system(params, mpc, None, **common)),
         }
     oracle = costs["oracle"]["control_cost"]
     rows["control_cost"] = costs

@@ -285,6 +285,30 @@ def test_causal_mpc_ignores_the_leader_future_and_the_oracle_uses_it():
         OracleController(leader_preview=False, leader_accel_decay_s=0.0)
 
 
+def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
+    twin = DigitalTwin(TwinParams(), batch_size=2, seed=4, radio=False)
+    twin.begin_interval()
+    horizon, known = 30, 8
+    trace = twin.leader_accel_mps2(twin.interval[:, None] + torch.arange(horizon))
+    partial = OracleController(horizon_intervals=horizon, preview_intervals=known)
+    planned = partial._planned_leader_accel(twin)
+    torch.testing.assert_close(planned[:, :known], trace[:, :known])
+    # after the preview: the last previewed acceleration decaying with 3 s time constant
+    elapsed_s = (torch.arange(horizon - known) + 0.5) * twin.params.platoon.control_interval_s
+    torch.testing.assert_close(
+        planned[:, known:], trace[:, known - 1 : known] * torch.exp(-elapsed_s / 3.0)
+    )
+    full = OracleController(horizon_intervals=horizon, preview_intervals=horizon)
+    torch.testing.assert_close(full._planned_leader_accel(twin), trace)
+    causal = OracleController(horizon_intervals=horizon, leader_preview=False)
+    none = OracleController(horizon_intervals=horizon, preview_intervals=0)
+    assert causal.preview_intervals == 0
+    torch.testing.assert_close(none._planned_leader_accel(twin), causal._planned_leader_accel(twin))
+    for bad in (-1, horizon + 1, 2.5, True):
+        with pytest.raises(ValueError, match=r"preview_intervals=.*\[0, horizon_intervals=30\]"):
+            OracleController(horizon_intervals=horizon, preview_intervals=bad)
+
+
 # ---------------------------------------------------------------------- registries
 def test_factories_build_the_named_baselines():
     params = TwinParams()

@@ -275,6 +275,10 @@ def _intra_op_threads(threads: int | None, device: torch.device):
         torch.set_num_threads(before)
 
 
+ORACLE_HORIZON_INTERVALS = 120
+"""Default planning horizon of :class:`OracleController` (intervals of 50 ms: 6 s)."""
+
+
 class OracleController:
     """Model-predictive control on the twin's true state with the leader's future known.
 
@@ -334,11 +338,16 @@ class OracleController:
         leader_accel_decay_s: time constant (s) of the causal MPC's leader model. On the
             synthetic traces (32 held-out scenarios × 10 s) 3 s gave the lowest cost of
             {0.5, 1, 2, 3, 5, ∞ (held)}; the spread among them was about 15 %.
+        preview_intervals: with ``leader_preview``, how many intervals (50 ms each) of the
+            leader's future the plan knows; beyond them it extrapolates the last known
+            acceleration with the same exponential decay. None (default): the whole
+            horizon. 0 is the causal MPC. Sweeping it measures how the value of preview
+            grows with the preview time (``benchmarks/training.py``).
     """
 
     def __init__(
         self,
-        horizon_intervals: int = 120,
+        horizon_intervals: int = ORACLE_HORIZON_INTERVALS,
         iterations: int = 60,
         lr: float = 0.1,
         discount: float = 1.0,
@@ -346,6 +355,7 @@ class OracleController:
         cpu_threads: int | None = 1,
         leader_preview: bool = True,
         leader_accel_decay_s: float = 3.0,
+        preview_intervals: int | None = None,
     ):
         for name, value, low in (
             ("horizon_intervals", horizon_intervals, 1),
@@ -353,6 +363,15 @@ class OracleController:
         ):
             if isinstance(value, bool) or not isinstance(value, int) or value < low:
                 raise ValueError(f"{name}={value!r} must be an integer >= {low}")
+        if preview_intervals is not None and (
+            isinstance(preview_intervals, bool)
+            or not isinstance(preview_intervals, int)
+            or not 0 <= preview_intervals <= horizon_intervals
+        ):
+            raise ValueError(
+                f"preview_intervals={preview_intervals!r} must be None or an integer in "
+                f"[0, horizon_intervals={horizon_intervals}]"
+            )
         if not lr > 0:
             raise ValueError(f"lr={lr!r} must be > 0")
         if not leader_accel_decay_s > 0:
@@ -371,6 +390,11 @@ class OracleController:
         self.cpu_threads = cpu_threads
         self.leader_preview = bool(leader_preview)
         self.leader_accel_decay_s = float(leader_accel_decay_s)
+        if not self.leader_preview:
+            preview_intervals = 0
+        self.preview_intervals = (
+            horizon_intervals if preview_intervals is None else int(preview_intervals)
+        )
         self._model: tuple | None = None
         self.reset()
 
@@ -497,15 +521,24 @@ class OracleController:
     def _planned_leader_accel(self, twin: DigitalTwin) -> torch.Tensor:
         """The leader's acceleration (m/s²) over the horizon as the plan assumes it, [B, H].
 
-        With preview, the trace's; without, the present acceleration decaying exponentially
-        with time constant ``leader_accel_decay_s``.
+        The trace's for the first ``preview_intervals`` intervals; after them the last known
+        acceleration (the present one without preview) decaying exponentially with time
+        constant ``leader_accel_decay_s``.
         """
         steps = torch.arange(self.horizon_intervals, device=twin.device)
-        if self.leader_preview:
+        known = self.preview_intervals
+        if known == self.horizon_intervals:
             return twin.leader_accel_mps2(twin.interval[:, None] + steps)
-        present = twin.platoon.accel_mps2[:, :1]
-        elapsed_s = (steps + 0.5).to(present.dtype) * twin.params.platoon.control_interval_s
-        return present * torch.exp(-elapsed_s / self.leader_accel_decay_s)
+        if known == 0:
+            last = twin.platoon.accel_mps2[:, :1]
+        else:
+            preview = twin.leader_accel_mps2(twin.interval[:, None] + steps[:known])
+            last = preview[:, -1:]
+        ahead = steps[known:] - known
+        dt = twin.params.platoon.control_interval_s
+        elapsed_s = (ahead + 0.5).to(last.dtype) * dt
+        tail = last * torch.exp(-elapsed_s / self.leader_accel_decay_s)
+        return tail if known == 0 else torch.cat([preview.to(tail.dtype), tail], dim=1)
 
     def _reference_plan(self, twin: DigitalTwin) -> torch.Tensor:
         """Closed-loop rollout of the reference controller on perfect observations, [H, B, F]."""
