@@ -228,6 +228,8 @@ BAD_CONFIGS = [
     (["rra.kappa1=high"], "rra.kappa1=high"),
     (["algo.num_envs=2.5"], "algo.num_envs=2.5"),
     (["task=nope"], "task='nope'"),
+    (["control.warm_start=teacher"], "control.warm_start='teacher'"),
+    (["algo.validation_scenarios=0"], "algo.validation_scenarios=0"),
     (["rra.kappa1=0,1"], "rra.kappa1=0,1"),
 ]
 

@@ -24,6 +24,7 @@ IVOI_ESTIMATORS = ("td", "rollout")
 LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
 COMPLETIONS = ("none", "hold", "kalman", "learned")
+WARM_STARTS = ("none", "causal_mpc")
 
 
 @dataclass
@@ -85,6 +86,7 @@ class AlgoConfig:
     # every N iterations of a stage, score the deterministic policy on fixed validation
     # scenarios and keep the best actor and critic for the stage's end (0: keep the last)
     validate_every: int = 0
+    validation_scenarios: int = 64  # scenarios per validation (whole batches of num_envs)
 
     @property
     def centralised_critic(self) -> bool:
@@ -100,6 +102,9 @@ class ControlConfig:
     augmentation: bool = True  # π̃ sees CAM delay/age and its previous command
     completion: str = "none"  # data completion of late/lost CAMs
     completion_predictor: str | None = None  # completion=learned: path of a trained predictor
+    # π* (learned control) before its first PPO stage: "causal_mpc" imitates the causal MPC
+    # (DAgger, vdtn_marl.algos.imitation); "none" starts PPO from the CACC prior
+    warm_start: str = "none"
 
 
 @dataclass
@@ -182,6 +187,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("algo.lr_schedule", a.lr_schedule, LR_SCHEDULES)
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
+    _choice("control.warm_start", c.warm_start, WARM_STARTS)
     if c.completion == "learned" and not c.completion_predictor:
         raise ConfigError(
             "control.completion_predictor=None: control.completion=learned needs the path of a "
@@ -213,6 +219,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     ):
         _positive_int(f"algo.{key}", getattr(a, key))
     _positive_int("algo.validate_every", a.validate_every, low=0)
+    _positive_int("algo.validation_scenarios", a.validation_scenarios)
     _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
     _real("algo.gamma", a.gamma, 0.0, 1.0)
     _real("algo.rra_gamma", a.rra_gamma, 0.0, 1.0)

@@ -132,7 +132,8 @@ def test_resume_continues_bit_for_bit(tmp_path, monkeypatch, algo):
 def test_linear_schedule_and_validation_keep_the_best_iterate(monkeypatch):
     algo = replace(TINY_ALGO, lr_schedule="linear", validate_every=2, lr=1e-3)
     trainer = PPOTrainer(VDTNTorchRLEnv("control", batch_size=8, seed=0), "vehicle", algo, seed=0)
-    scores = iter([0.5, 2.0, 1.0])  # validated after iterations 1, 3 and 4 (the stage's last)
+    # validated at the start, after iterations 1, 3 and 4 (the stage's last)
+    scores = iter([1.5, 0.5, 2.0, 1.0])
     monkeypatch.setattr(PPOTrainer, "validation_return", lambda self: next(scores))
     assert trainer.learning_rate() == pytest.approx(1e-3)  # outside a stage: constant
     trainer.begin_stage(5)
@@ -152,6 +153,34 @@ def test_linear_schedule_and_validation_keep_the_best_iterate(monkeypatch):
     assert trainer.finish_stage() == {"best_iteration": None, "best_return": None}
     with pytest.raises(ValueError, match="stage iterations=0"):
         trainer.begin_stage(0)
+
+
+def test_validation_keeps_the_starting_weights_unless_ppo_beats_them(monkeypatch):
+    algo = replace(TINY_ALGO, validate_every=1, lr=1e-2)
+    trainer = PPOTrainer(VDTNTorchRLEnv("control", batch_size=8, seed=0), "vehicle", algo, seed=0)
+    trainer.train_iteration()  # the stage starts after iteration 0
+    start = [p.detach().clone() for p in trainer.actor.parameters()]
+    scores = iter([3.0, 1.0, 2.0])  # the start, then iterations 1 and 2
+    monkeypatch.setattr(PPOTrainer, "validation_return", lambda self: next(scores))
+    trainer.begin_stage(2)
+    trainer.train_iteration()
+    trainer.train_iteration()
+    assert not all(
+        torch.equal(a, b) for a, b in zip(trainer.actor.parameters(), start, strict=True)
+    )
+    assert trainer.finish_stage() == {"best_iteration": 0, "best_return": 3.0}
+    assert all(torch.equal(a, b) for a, b in zip(trainer.actor.parameters(), start, strict=True))
+
+
+def test_validation_scores_whole_batches_of_at_least_validation_scenarios():
+    algo = replace(TINY_ALGO, validation_scenarios=10)
+    trainer = PPOTrainer(VDTNTorchRLEnv("control", batch_size=4, seed=0), "vehicle", algo, seed=3)
+    trainer.fit_observation_scaling()
+    rollouts = []
+    original = trainer.env.rollout
+    trainer.env.rollout = lambda *a, **k: rollouts.append(1) or original(*a, **k)
+    trainer.validation_return()
+    assert len(rollouts) == 3  # ceil(10 / 4) batches of 4 scenarios
 
 
 def test_validation_return_is_repeatable_and_deterministic():

@@ -2,7 +2,9 @@
 
 One JOCC iteration runs four stages:
 
-1. ``control_perfect``: train π* (MAPPO, group ``vehicle``) on perfect observations;
+1. ``control_perfect``: train π* (MAPPO, group ``vehicle``) on perfect observations (with
+   ``control.warm_start=causal_mpc``, π* first imitates the causal MPC, once, before its first
+   stage: :mod:`vdtn_marl.algos.imitation`);
 2. ``control_impaired``: train π̃ on impaired observations (CAM delay/age and the previous
    command in its state) under the current RRA policy: uniformly random in iteration 0, the
    learned RRA policy afterwards (or the configured RRA baseline);
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +46,7 @@ from vdtn_marl.algos.checkpoint import (
     set_rng_state,
 )
 from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
+from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
 from vdtn_marl.config import RunConfig, to_dict, validate
@@ -121,7 +125,7 @@ class JointOptimisation:
         self.control_learned = control.name == "learned"
         self.rra_learned = rra.learned
         self.gamma = algo.gamma
-        train_traces = trace_source(cfg, "train")
+        self.train_traces = train_traces = trace_source(cfg, "train")
         self.eval_traces = trace_source(cfg, "eval")
         env_kw: dict[str, Any] = dict(
             batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
@@ -285,6 +289,8 @@ class JointOptimisation:
         if stage == "control_impaired":
             self.rra_slot.policy = self._rra_policy()
         if self.position["stage_start"] is None:
+            if stage == "control_perfect" and trainer.iteration == 0:
+                self._warm_start_pi_star()
             self.position["stage_start"] = trainer.iteration
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
@@ -301,6 +307,25 @@ class JointOptimisation:
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
+
+    def _warm_start_pi_star(self) -> None:
+        """``control.warm_start=causal_mpc``: π* imitates the causal MPC before its first PPO
+        stage (:func:`~vdtn_marl.algos.imitation.distill_teacher`, on the training traces)."""
+        if self.cfg.control.warm_start == "none":
+            return
+        teacher = make_control_baseline("causal_mpc", self.params)
+        intervals = min(200, self.params.episode_intervals)
+        ticks = distillation_ticks(intervals=intervals)
+        with progress(ticks, "π* imitating the causal MPC", self.cfg.progress) as bar:
+            stats = distill_teacher(
+                self.pi_star,
+                teacher,
+                self.params,
+                intervals=intervals,
+                trace_source=self.train_traces,
+                progress=bar.update,
+            )
+        self.position["warm_start"] = {"teacher": self.cfg.control.warm_start, **asdict(stats)}
 
     def evaluate(self) -> dict[str, Any]:
         """The ``evaluate`` stage: metrics of the acting system, EVoI against π*."""
@@ -463,6 +488,7 @@ class JointOptimisation:
             "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
             # with algo.validate_every: the trainer iteration whose weights each stage kept
             "selected_iterations": dict(self.position.get("selected_iterations", {})),
+            "warm_start": self.position.get("warm_start"),
             "seconds": seconds,
             "resumed": resumed,
             **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},

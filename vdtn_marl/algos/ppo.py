@@ -9,10 +9,11 @@ collector would add nothing but a copy).
 Training stages (:meth:`PPOTrainer.begin_stage` … :meth:`PPOTrainer.finish_stage`) add two
 switches of :class:`~vdtn_marl.config.AlgoConfig`: ``lr_schedule="linear"`` anneals the
 learning rate linearly to zero over the stage, and ``validate_every=N`` scores the
-deterministic policy every N iterations (and at the stage's last) on fixed validation
-scenarios, seeded apart from the training and evaluation ones, and hands back the best-scoring
-actor and critic at the end of the stage (model selection; the last iterate of PPO can be
-much worse than an earlier one).
+deterministic policy at the stage's start, every N iterations and at the stage's last on fixed
+validation scenarios (``validation_scenarios`` of them, seeded apart from the training and
+evaluation ones), and hands back the best-scoring actor and critic at the end of the stage
+(model selection; the last iterate of PPO can be much worse than an earlier one, and a
+warm-started policy is kept unless PPO beats it).
 
 Reproducibility: iteration ``k`` collects from freshly reset scenarios seeded with
 ``seed_for(k)``; action sampling and minibatch shuffles use the global torch RNG, whose state
@@ -202,18 +203,23 @@ class PPOTrainer:
 
     def validation_return(self) -> float:
         """Mean reward (per agent and step) of the deterministic policy on the validation
-        scenarios: ``rollout_steps`` steps of ``num_envs`` scenarios seeded with
-        ``seed_for(VALIDATION_ITERATION)``, the same at every call."""
+        scenarios: ``rollout_steps`` steps of at least ``algo.validation_scenarios``
+        scenarios (whole batches of the environment's B), drawn after seeding the environment
+        with ``seed_for(VALIDATION_ITERATION)``, the same at every call."""
+        batches = -(-self.algo.validation_scenarios // max(1, self.env.batch_size.numel()))
         self.env.set_seed(self.seed_for(VALIDATION_ITERATION))
+        total = 0.0
         with torch.no_grad(), set_interaction_type(InteractionType.DETERMINISTIC):
-            data = self.env.rollout(
-                self.rollout_steps,
-                policy=self.actor,
-                tensordict=self.env.reset(),
-                auto_reset=False,
-                break_when_any_done=False,
-            )
-        return float(data.get(("next", self.group, "reward")).mean())
+            for _ in range(batches):
+                data = self.env.rollout(
+                    self.rollout_steps,
+                    policy=self.actor,
+                    tensordict=self.env.reset(),
+                    auto_reset=False,
+                    break_when_any_done=False,
+                )
+                total += float(data.get(("next", self.group, "reward")).mean())
+        return total / batches
 
     # ------------------------------------------------------------------ stages
     def begin_stage(self, iterations: int) -> None:
@@ -228,6 +234,24 @@ class PPOTrainer:
             "best_iteration": None,
             "best_state": None,
         }
+        if self.algo.validate_every:
+            # the weights the stage starts from are a candidate too (iteration start − 1):
+            # PPO must beat them on the validation scenarios to replace them
+            if not self.scaling_fitted:
+                self.fit_observation_scaling()
+            self._keep_if_best(self.validation_return(), self.iteration - 1)
+
+    def _keep_if_best(self, validation: float, iteration: int) -> None:
+        best = self.stage["best_return"]
+        if best is None or validation > best:
+            self.stage.update(
+                best_return=validation,
+                best_iteration=iteration,
+                best_state={
+                    "actor": copy.deepcopy(self.actor.state_dict()),
+                    "critic": copy.deepcopy(self.critic.state_dict()),
+                },
+            )
 
     def learning_rate(self) -> float:
         """Learning rate of the current iteration's update: ``algo.lr``, or with
@@ -270,16 +294,7 @@ class PPOTrainer:
         validation = float("nan")
         if self._validate_now():
             validation = self.validation_return()
-            best = self.stage["best_return"]
-            if best is None or validation > best:
-                self.stage.update(
-                    best_return=validation,
-                    best_iteration=self.iteration,
-                    best_state={
-                        "actor": copy.deepcopy(self.actor.state_dict()),
-                        "critic": copy.deepcopy(self.critic.state_dict()),
-                    },
-                )
+            self._keep_if_best(validation, self.iteration)
         stats = IterationStats(
             iteration=self.iteration,
             frames=int(data.numel()),

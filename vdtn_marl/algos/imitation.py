@@ -1,0 +1,188 @@
+"""Warm start of the acceleration policy by imitating a model-predictive teacher (DAgger).
+
+PPO from the CACC prior improves on CACC by a few percent within the default budgets; the
+causal MPC (:class:`~vdtn_marl.algos.baselines.OracleController` with
+``leader_preview=False``) is about 15 % better than CACC, and it is causal: it plans from the
+present state only. :func:`distill_teacher` copies such a teacher into the actor of a
+:class:`~vdtn_marl.algos.ppo.PPOTrainer` before PPO fine-tunes it (``control.warm_start`` in
+the run config), in the manner of DAgger (Ross, Gordon and Bagnell, AISTATS 2011):
+
+- round 0 drives the twin with the teacher's commands plus Gaussian exploration noise
+  (``exploration_std_mps2``); every later round drives it with the current student, so the
+  data covers the states the student itself visits;
+- in every round the teacher labels each visited state with its command u (m/s²), on perfect
+  observations, and the aggregated data set grows;
+- after each round the actor's deterministic command (the mode of its TanhNormal,
+  ``center + half_range · tanh(loc)``) is fitted to the labels by mean squared error with Adam.
+
+Only the actor's location network changes (its observation scaling is fitted first, from the
+trainer's own scaling rollout, so PPO continues from the same input statistics); the
+exploration scale and the critic are PPO's to learn. The scenarios of round r are seeded with
+``trainer.seed_for(DISTILLATION_ITERATION − r)``, apart from every training, scaling and
+validation batch, and the noise and minibatches draw from a generator seeded with the trainer's
+seed, so a warm start is repeatable and leaves the global torch RNG alone (except for the
+trainer's observation-scaling rollout, when it has not run yet).
+
+Measured (``benchmarks/training.py``, 3 rounds × 32 scenarios × 10 s, ≈ 100 s on one CPU
+thread): see the README's training figures.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import torch
+
+from vdtn_marl.algos.ppo import SEED_STRIDE, ActorPolicy, PPOTrainer
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.twin import DigitalTwin
+
+#: ``seed_for`` offset of the first distillation round's scenarios (later rounds count down).
+DISTILLATION_ITERATION = SEED_STRIDE - 3
+#: Most rounds a distillation may run (keeps its seeds clear of the training iterations').
+MAX_ROUNDS = 64
+
+
+@dataclass
+class DistillationStats:
+    """What a warm start did."""
+
+    rounds: int
+    samples: int  # (state, command) pairs: scenario-intervals × followers
+    rms_error_mps2: float  # root mean squared error of the student on all the data, m/s²
+    seconds: float
+
+
+def distillation_ticks(rounds: int = 3, intervals: int = 200, fit_steps: int = 3000) -> int:
+    """How many times :func:`distill_teacher` calls ``progress`` (for a progress bar)."""
+    return rounds * (intervals + fit_steps // 100)
+
+
+def _check(name: str, value, low, kind=int) -> None:
+    if isinstance(value, bool) or not isinstance(value, kind) or not value >= low:
+        what = "an integer" if kind is int else "a number"
+        raise ValueError(f"{name}={value!r} must be {what} >= {low}")
+
+
+def _location_network(trainer: PPOTrainer) -> torch.nn.Module:
+    """The actor's observation → pre-tanh location module (ResidualLocation)."""
+    return trainer.actor.module[0].module[0]
+
+
+def distill_teacher(
+    trainer: PPOTrainer,
+    teacher: Callable[[DigitalTwin], torch.Tensor],
+    params: TwinParams,
+    *,
+    rounds: int = 3,
+    scenarios: int = 32,
+    intervals: int = 200,
+    fit_steps: int = 3000,
+    minibatch_size: int = 1024,
+    lr: float = 1e-3,
+    exploration_std_mps2: float = 0.1,
+    trace_source=None,
+    progress: Callable[[int], None] | None = None,
+) -> DistillationStats:
+    """Fit ``trainer``'s vehicle actor to ``teacher`` on perfect observations (see module doc).
+
+    Args:
+        trainer: a PPOTrainer of the ``vehicle`` group with a continuous (TanhNormal) actor.
+        teacher: twin → commands [B, F] (m/s²) from the twin's current state, e.g. an unbound
+            :class:`~vdtn_marl.algos.baselines.OracleController` (causal: ``leader_preview=False``).
+            Its ``reset()``, if any, is called at the start of each round.
+        params: the twin model the scenarios run on (the trainer's environment's).
+        rounds: DAgger rounds (round 0: teacher + noise drives; later: the student).
+        scenarios: scenarios B per round; ``intervals`` control intervals each (≤ the episode).
+        fit_steps, minibatch_size, lr: Adam steps, minibatch and step size after each round.
+        exploration_std_mps2: std (m/s²) of the noise on the teacher's commands in round 0.
+        trace_source: the leader traces (default: the model's).
+        progress: called with 1 after every simulated interval and every 100 fit steps.
+    """
+    if trainer.group != "vehicle":
+        raise ValueError(f"distillation trains the 'vehicle' group, not {trainer.group!r}")
+    _check("rounds", rounds, 1)
+    if rounds > MAX_ROUNDS:
+        raise ValueError(f"rounds={rounds!r} must be <= {MAX_ROUNDS}")
+    _check("scenarios", scenarios, 1)
+    _check("fit_steps", fit_steps, 0)
+    _check("minibatch_size", minibatch_size, 1)
+    _check("intervals", intervals, 1)
+    if intervals > params.episode_intervals:
+        raise ValueError(
+            f"intervals={intervals} must be <= the model's episode_intervals="
+            f"{params.episode_intervals}"
+        )
+    if not lr > 0:
+        raise ValueError(f"lr={lr!r} must be > 0")
+    if not exploration_std_mps2 >= 0:
+        raise ValueError(f"exploration_std_mps2={exploration_std_mps2!r} must be >= 0 m/s²")
+    began = time.perf_counter()
+    tick = progress or (lambda n: None)
+    if not trainer.scaling_fitted:
+        trainer.fit_observation_scaling()
+    pp = params.platoon
+    low, high = pp.accel_min_mps2, pp.accel_max_mps2
+    device = trainer.device
+    location = _location_network(trainer)
+    student = ActorPolicy(trainer.actor, "vehicle")
+    generator = torch.Generator(device=device).manual_seed(trainer.seed)
+    optimizer = torch.optim.Adam(location.parameters(), lr=lr)
+
+    def command(observation: torch.Tensor) -> torch.Tensor:
+        loc = location(observation).squeeze(-1)
+        return (high + low) / 2 + (high - low) / 2 * torch.tanh(loc)
+
+    observations: list[torch.Tensor] = []
+    labels: list[torch.Tensor] = []
+    for r in range(rounds):
+        seed = trainer.seed_for(DISTILLATION_ITERATION - r)
+        twin = DigitalTwin(
+            params, batch_size=scenarios, device=device, seed=seed, radio=False,
+            trace_source=trace_source, backend="torch",
+        )  # fmt: skip
+        twin.reset(seed=seed)
+        if hasattr(teacher, "reset"):
+            teacher.reset()
+        alive = torch.ones(scenarios, dtype=torch.bool, device=device)
+        for k in range(intervals):
+            if k > 0:
+                twin.begin_interval()
+            observation = twin.vehicle_observation(perfect=True)
+            with torch.no_grad():
+                label = teacher(twin).to(observation.dtype)
+                if r == 0:
+                    noise = torch.randn(
+                        label.shape, generator=generator, device=device, dtype=label.dtype
+                    )
+                    act = label + exploration_std_mps2 * noise
+                else:
+                    act = student(observation).to(label.dtype)
+            observations.append(observation[alive])  # a collided scenario teaches nothing
+            labels.append(label[alive])
+            record = twin.finish_interval(act.clamp(low, high), perfect=True)
+            alive &= ~record.collided.any(-1)
+            tick(1)
+        data_x = torch.cat(observations)
+        data_y = torch.cat(labels)
+        for step in range(fit_steps):
+            index = torch.randint(
+                0, data_x.shape[0], (min(minibatch_size, data_x.shape[0]),),
+                generator=generator, device=device,
+            )  # fmt: skip
+            loss = (command(data_x[index]) - data_y[index]).pow(2).mean()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            if (step + 1) % 100 == 0:
+                tick(1)
+    with torch.no_grad():
+        rms = float((command(data_x) - data_y).pow(2).mean().sqrt())
+    return DistillationStats(
+        rounds=rounds,
+        samples=int(data_y.numel()),
+        rms_error_mps2=rms,
+        seconds=time.perf_counter() - began,
+    )
