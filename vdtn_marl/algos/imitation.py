@@ -1,8 +1,8 @@
 """Warm start of the acceleration policy by imitating a model-predictive teacher (DAgger).
 
-PPO from the CACC prior improves on CACC by a few percent within the default budgets; the
+PPO from the CACC prior improves on CACC by 7–8 % within the default budgets; the
 causal MPC (:class:`~vdtn_marl.algos.baselines.OracleController` with
-``leader_preview=False``) is about 15 % better than CACC, and it is causal: it plans from the
+``leader_preview=False``) is 8–16 % better than CACC, and it is causal: it plans from the
 present state only. :func:`distill_teacher` copies such a teacher into the actor of a
 :class:`~vdtn_marl.algos.ppo.PPOTrainer` before PPO fine-tunes it (``control.warm_start`` in
 the run config), in the manner of DAgger (Ross, Gordon and Bagnell, AISTATS 2011):
