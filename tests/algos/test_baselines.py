@@ -282,7 +282,7 @@ def test_causal_mpc_ignores_the_leader_future_and_the_oracle_uses_it():
     torch.testing.assert_close(commands["causal_mpc", "true"], commands["causal_mpc", "braking"])
     assert not torch.allclose(commands["oracle", "true"], commands["oracle", "braking"], atol=1e-3)
     with pytest.raises(ValueError, match="leader_accel_decay_s"):
-        OracleController(leader_preview=False, leader_accel_decay_s=0.0)
+        OracleController(preview_intervals=0, leader_accel_decay_s=0.0)
 
 
 def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
@@ -300,10 +300,14 @@ def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
     )
     full = OracleController(horizon_intervals=horizon, preview_intervals=horizon)
     torch.testing.assert_close(full._planned_leader_accel(twin), trace)
-    causal = OracleController(horizon_intervals=horizon, leader_preview=False)
-    none = OracleController(horizon_intervals=horizon, preview_intervals=0)
-    assert causal.preview_intervals == 0
-    torch.testing.assert_close(none._planned_leader_accel(twin), causal._planned_leader_accel(twin))
+    causal = make_control_baseline("causal_mpc", twin.params, horizon_intervals=horizon)
+    assert causal.preview_intervals == 0 and not causal.leader_preview
+    assert full.leader_preview and OracleController().preview_intervals == 120
+    elapsed_s = (torch.arange(horizon) + 0.5) * twin.params.platoon.control_interval_s
+    torch.testing.assert_close(  # the present acceleration, decaying
+        causal._planned_leader_accel(twin),
+        twin.platoon.accel_mps2[:, :1] * torch.exp(-elapsed_s / 3.0),
+    )
     for bad in (-1, horizon + 1, 2.5, True):
         with pytest.raises(ValueError, match=r"preview_intervals=.*\[0, horizon_intervals=30\]"):
             OracleController(horizon_intervals=horizon, preview_intervals=bad)

@@ -295,7 +295,7 @@ class OracleController:
     horizon, z_{h+1} = Φ^{h+1} z_0 + Σ_{j≤h} Φ^{h−j} G u_j, so a whole horizon costs one small
     matmul and is differentiable in U. It equals H calls of ``integrator.integrate`` as long as
     no follower's speed reaches the 0 m/s clamp (the twin clamps, the plan does not). The
-    leader follows ``twin.leader_accel_mps2`` over the horizon (``leader_preview=False``:
+    leader follows ``twin.leader_accel_mps2`` over the horizon (``preview_intervals=0``:
     an extrapolation of its present acceleration). The first interval uses the
     true switch subframe when one is given (u_{k−1} in force until then); later intervals
     assume switch 0 (perfect observation).
@@ -329,20 +329,17 @@ class OracleController:
         cpu_threads: torch intra-op threads while planning on a CPU twin (restored after).
             The tensors are tiny, so extra threads only add synchronisation, which costs
             tens of ms per op on a loaded machine; None leaves torch's setting alone.
-        leader_preview: True (default): the plan uses the leader's known future
-            acceleration (the oracle). False: a causal MPC that knows only the present: it
-            assumes the leader's current acceleration decays exponentially with time constant
-            ``leader_accel_decay_s`` (s) over the horizon, and re-plans every interval. The
-            cost gap between the two is the value of previewing the leader trace, which a
-            policy that observes only the present cannot close.
-        leader_accel_decay_s: time constant (s) of the causal MPC's leader model. On the
-            synthetic traces (32 held-out scenarios × 10 s) 3 s gave the lowest cost of
-            {0.5, 1, 2, 3, 5, ∞ (held)}; the spread among them was about 15 %.
-        preview_intervals: with ``leader_preview``, how many intervals (50 ms each) of the
-            leader's future the plan knows; beyond them it extrapolates the last known
-            acceleration with the same exponential decay. None (default): the whole
-            horizon. 0 is the causal MPC. Sweeping it measures how the value of preview
-            grows with the preview time (``benchmarks/training.py``).
+        preview_intervals: how many intervals (50 ms each) of the leader's future the plan
+            knows; beyond them it assumes the last known acceleration decays exponentially
+            with time constant ``leader_accel_decay_s``. None (default): the whole horizon
+            (the oracle). 0: the causal MPC, which knows only the present and re-plans every
+            interval; the cost gap between the two is the value of previewing the leader
+            trace, which a policy that observes only the present cannot close. Values in
+            between measure how that value grows with the preview (``benchmarks/training.py``).
+        leader_accel_decay_s: time constant (s) of the leader model after the preview. For
+            the causal MPC, on the synthetic traces (32 held-out scenarios × 10 s), 3 s gave
+            the lowest cost of {0.5, 1, 2, 3, 5, ∞ (held)}; the spread among them was about
+            15 %.
     """
 
     def __init__(
@@ -353,9 +350,8 @@ class OracleController:
         discount: float = 1.0,
         reference: Callable[[torch.Tensor], torch.Tensor] | None = None,
         cpu_threads: int | None = 1,
-        leader_preview: bool = True,
-        leader_accel_decay_s: float = 3.0,
         preview_intervals: int | None = None,
+        leader_accel_decay_s: float = 3.0,
     ):
         for name, value, low in (
             ("horizon_intervals", horizon_intervals, 1),
@@ -388,15 +384,17 @@ class OracleController:
         self.discount = float(discount)
         self.reference = reference
         self.cpu_threads = cpu_threads
-        self.leader_preview = bool(leader_preview)
         self.leader_accel_decay_s = float(leader_accel_decay_s)
-        if not self.leader_preview:
-            preview_intervals = 0
         self.preview_intervals = (
             horizon_intervals if preview_intervals is None else int(preview_intervals)
         )
         self._model: tuple | None = None
         self.reset()
+
+    @property
+    def leader_preview(self) -> bool:
+        """Whether the plan knows any of the leader's future (False: the causal MPC)."""
+        return self.preview_intervals > 0
 
     def reset(self) -> None:
         """Forget the previous plan (warm start); the next call starts from the reference."""
@@ -686,7 +684,7 @@ RRA_BASELINES: dict[str, type] = {
 CONTROL_BASELINES: dict[str, type] = {
     "cacc": CACCController,
     "oracle": OracleController,
-    "causal_mpc": OracleController,  # leader_preview=False
+    "causal_mpc": OracleController,  # preview_intervals=0
 }
 
 
@@ -734,7 +732,7 @@ def make_control_baseline(
     twin's true state: given a :class:`DigitalTwin` it returns the bound callable
     ``OracleController(**kwargs).bind(twin)``; given parameters it returns the unbound
     :class:`OracleController` — call ``.bind(twin)`` before using it as a control module.
-    ``"causal_mpc"`` is the same controller with ``leader_preview=False`` (no knowledge of the
+    ``"causal_mpc"`` is the same controller with ``preview_intervals=0`` (no knowledge of the
     leader's future). ``kwargs`` go to the controller's constructor.
     """
     if name not in CONTROL_BASELINES:
@@ -754,6 +752,6 @@ def make_control_baseline(
             f"expected a DigitalTwin, TwinParams or PlatoonParams, got {type(params).__name__}"
         )
     if name == "causal_mpc":
-        kwargs.setdefault("leader_preview", False)
+        kwargs.setdefault("preview_intervals", 0)
     oracle = OracleController(**kwargs)
     return oracle.bind(twin) if twin is not None else oracle

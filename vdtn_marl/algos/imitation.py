@@ -2,7 +2,7 @@
 
 PPO from the CACC prior improves on CACC by 7–8 % within the default budgets; the
 causal MPC (:class:`~vdtn_marl.algos.baselines.OracleController` with
-``leader_preview=False``) is 8–16 % better than CACC, and it is causal: it plans from the
+``preview_intervals=0``) is 8–16 % better than CACC, and it is causal: it plans from the
 present state only. :func:`distill_teacher` copies such a teacher into the actor of a
 :class:`~vdtn_marl.algos.ppo.PPOTrainer` before PPO fine-tunes it (``control.warm_start`` in
 the run config), in the manner of DAgger (Ross, Gordon and Bagnell, AISTATS 2011):
@@ -66,11 +66,6 @@ def _check(name: str, value, low, kind=int) -> None:
         raise ValueError(f"{name}={value!r} must be {what} >= {low}")
 
 
-def _location_network(trainer: PPOTrainer) -> torch.nn.Module:
-    """The actor's observation → pre-tanh location module (ResidualLocation)."""
-    return trainer.actor.module[0].module[0]
-
-
 def distill_teacher(
     trainer: PPOTrainer,
     teacher: Callable[[DigitalTwin], torch.Tensor],
@@ -91,7 +86,7 @@ def distill_teacher(
     Args:
         trainer: a PPOTrainer of the ``vehicle`` group with a continuous (TanhNormal) actor.
         teacher: twin → commands [B, F] (m/s²) from the twin's current state, e.g. an unbound
-            :class:`~vdtn_marl.algos.baselines.OracleController` (causal: ``leader_preview=False``).
+            :class:`~vdtn_marl.algos.baselines.OracleController` (causal: ``preview_intervals=0``).
             Its ``reset()``, if any, is called at the start of each round.
         params: the twin model the scenarios run on (the trainer's environment's).
         rounds: DAgger rounds (round 0: teacher + noise drives; later: the student).
@@ -126,15 +121,10 @@ def distill_teacher(
     pp = params.platoon
     low, high = pp.accel_min_mps2, pp.accel_max_mps2
     device = trainer.device
-    location = _location_network(trainer)
     student = ActorPolicy(trainer.actor, "vehicle")
     generator = torch.Generator(device=device).manual_seed(trainer.seed)
-    optimizer = torch.optim.Adam(location.parameters(), lr=lr)
-
-    def command(observation: torch.Tensor) -> torch.Tensor:
-        loc = location(observation).squeeze(-1)
-        return (high + low) / 2 + (high - low) / 2 * torch.tanh(loc)
-
+    # only the location network has a gradient: the mode does not depend on the scale
+    optimizer = torch.optim.Adam(trainer.actor.parameters(), lr=lr)
     observations: list[torch.Tensor] = []
     labels: list[torch.Tensor] = []
     for r in range(rounds):
@@ -172,14 +162,14 @@ def distill_teacher(
                 0, data_x.shape[0], (min(minibatch_size, data_x.shape[0]),),
                 generator=generator, device=device,
             )  # fmt: skip
-            loss = (command(data_x[index]) - data_y[index]).pow(2).mean()
+            loss = (student.action(data_x[index]) - data_y[index]).pow(2).mean()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             optimizer.step()
             if (step + 1) % 100 == 0:
                 tick(1)
     with torch.no_grad():
-        rms = float((command(data_x) - data_y).pow(2).mean().sqrt())
+        rms = float((student(data_x) - data_y).pow(2).mean().sqrt())
     return DistillationStats(
         rounds=rounds,
         samples=int(data_y.numel()),

@@ -206,7 +206,7 @@ class PPOTrainer:
         scenarios: ``rollout_steps`` steps of at least ``algo.validation_scenarios``
         scenarios (whole batches of the environment's B), drawn after seeding the environment
         with ``seed_for(VALIDATION_ITERATION)``, the same at every call."""
-        batches = -(-self.algo.validation_scenarios // max(1, self.env.batch_size.numel()))
+        batches = -(-self.algo.validation_scenarios // self.env.batch_size.numel())
         self.env.set_seed(self.seed_for(VALIDATION_ITERATION))
         total = 0.0
         with torch.no_grad(), set_interaction_type(InteractionType.DETERMINISTIC):
@@ -345,6 +345,11 @@ class ActorPolicy:
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        return self.action(observation)
+
+    def action(self, observation: torch.Tensor) -> torch.Tensor:
+        """The actions as :meth:`__call__` gives them, differentiable in the actor's
+        parameters (deterministic continuous actions; used to fit the actor by imitation)."""
         observation = torch.as_tensor(observation, dtype=torch.float32)
         td = TensorDict(
             {(self.group, "observation"): observation},
