@@ -11,6 +11,7 @@ import torch
 from vdtn_marl.algos.baselines import (
     CONTROL_BASELINES,
     RRA_BASELINES,
+    ExactOracleController,
     GreedyRRAPolicy,
     OracleController,
     RoundRobinRRAPolicy,
@@ -317,7 +318,7 @@ def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
 def test_factories_build_the_named_baselines():
     params = TwinParams()
     assert set(RRA_BASELINES) == {"random", "round_robin", "greedy"}
-    assert set(CONTROL_BASELINES) == {"cacc", "oracle", "causal_mpc"}
+    assert set(CONTROL_BASELINES) == {"cacc", "oracle", "causal_mpc", "exact_oracle"}
     assert isinstance(make_rra_baseline("random", params, seed=1), RandomRRAPolicy)
     rr = make_rra_baseline("round_robin", params)
     assert isinstance(rr, RoundRobinRRAPolicy) and rr.power_level == 0
@@ -327,6 +328,8 @@ def test_factories_build_the_named_baselines():
     causal = make_control_baseline("causal_mpc", params)
     assert isinstance(causal, OracleController) and not causal.leader_preview
     assert make_control_baseline("oracle", params).leader_preview
+    exact = make_control_baseline("exact_oracle", params, horizon_intervals=5)
+    assert isinstance(exact, ExactOracleController) and exact.horizon_intervals == 5
 
 
 @pytest.mark.parametrize(

@@ -15,9 +15,15 @@ Control baselines map vehicle observations ``[B, F, 8]`` to commands ``[B, F]`` 
 - ``"cacc"``: the linear CACC on the (possibly delayed) observation,
   :class:`~vdtn_marl.sim.cacc.CACCController` (not duplicated here).
 - ``"oracle"``: :class:`OracleController`, receding-horizon optimisation of the control reward
-  on the twin's true state and the leader's known future trace: the perfect-observation,
-  model-predictive lower bound on control cost. It reads the twin, not the observation: use
-  :meth:`OracleController.bind` to get an observation → command callable.
+  on the twin's true state and the leader's known future trace (model-predictive control with
+  preview). It reads the twin, not the observation: use :meth:`OracleController.bind` to get
+  an observation → command callable. It also works with impaired observation (the command
+  waits for the CAM), but its subgradient solver stops well short of the optimum: on
+  perfect observation its cost was 29–42 % above the exact optimum, so it is not a lower
+  bound on control cost.
+- ``"exact_oracle"``: :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`, the exact
+  minimum of the episode's control cost over the known trace (a linear program solved once
+  per episode): the perfect-observation lower bound on control cost.
 - ``"causal_mpc"``: the same optimisation without the leader's future (it extrapolates the
   leader's present acceleration): the model-based reference for policies that observe only
   the present, such as π*.
@@ -38,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from vdtn_marl.algos.exact_oracle import ORACLE_HORIZON_INTERVALS, ExactOracleController
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.link import RRA_OBS_GAIN_SCALE_DB
@@ -53,6 +60,7 @@ from vdtn_marl.sim.twin import RRA_CONTROL_FEATURES, DigitalTwin
 
 __all__ = [
     "CONTROL_BASELINES",
+    "ExactOracleController",
     "RRA_BASELINES",
     "GreedyRRAPolicy",
     "OracleController",
@@ -275,10 +283,6 @@ def _intra_op_threads(threads: int | None, device: torch.device):
         torch.set_num_threads(before)
 
 
-ORACLE_HORIZON_INTERVALS = 120
-"""Default planning horizon of :class:`OracleController` (intervals of 50 ms: 6 s)."""
-
-
 class OracleController:
     """Model-predictive control on the twin's true state with the leader's future known.
 
@@ -287,8 +291,12 @@ class OracleController:
     (:func:`~vdtn_marl.sim.platoon.control_reward` plus the collision penalty, as in
     :mod:`vdtn_marl.voi`) over the next ``horizon_intervals`` intervals, with the commands
     U ∈ [u_min, u_max]^{H×F} (m/s²) as decision variables, and applies the first (receding
-    horizon). It is the perfect-observation, model-predictive lower bound on control cost
-    that the impaired systems are compared with.
+    horizon). It is model-predictive control with a preview of the leader trace, and it also
+    works with impaired observation (the first command waits for the CAM). It is *not* the
+    lower bound on control cost: its subgradient solver stops well short of the optimum of
+    this piecewise-linear objective, and on perfect observation its cost was 29–42 % above
+    the exact optimum that :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`
+    computes (README, Benchmarks), and on the stop-and-go UDDS cycle it did worse than CACC.
 
     Planning model: the interval map of the twin's own :class:`IntervalIntegrator`
     (``phi_t``, ``input_gain``, ``leader_pos_gain``), unrolled in closed form over the
@@ -685,6 +693,7 @@ CONTROL_BASELINES: dict[str, type] = {
     "cacc": CACCController,
     "oracle": OracleController,
     "causal_mpc": OracleController,  # preview_intervals=0
+    "exact_oracle": ExactOracleController,  # perfect observation only
 }
 
 
@@ -725,7 +734,7 @@ def make_rra_baseline(
 def make_control_baseline(
     name: str, params: DigitalTwin | TwinParams | PlatoonParams | None = None, **kwargs
 ):
-    """A control baseline by name (``"cacc"``, ``"oracle"``, ``"causal_mpc"``).
+    """A control baseline by name (``"cacc"``, ``"oracle"``, ``"causal_mpc"``, ``"exact_oracle"``).
 
     ``"cacc"`` returns a :class:`~vdtn_marl.sim.cacc.CACCController` for the platoon
     parameters (observations ``[B, F, 8]`` → commands ``[B, F]``). ``"oracle"`` needs the
@@ -733,7 +742,10 @@ def make_control_baseline(
     ``OracleController(**kwargs).bind(twin)``; given parameters it returns the unbound
     :class:`OracleController` — call ``.bind(twin)`` before using it as a control module.
     ``"causal_mpc"`` is the same controller with ``preview_intervals=0`` (no knowledge of the
-    leader's future). ``kwargs`` go to the controller's constructor.
+    leader's future). ``"exact_oracle"``: the
+    :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`, the exact lower bound with
+    perfect observation (bound likewise; a twin with radio raises). ``kwargs`` go to the
+    controller's constructor.
     """
     if name not in CONTROL_BASELINES:
         raise ValueError(
@@ -753,5 +765,6 @@ def make_control_baseline(
         )
     if name == "causal_mpc":
         kwargs.setdefault("preview_intervals", 0)
-    oracle = OracleController(**kwargs)
+    make = ExactOracleController if name == "exact_oracle" else OracleController
+    oracle = make(**kwargs)
     return oracle.bind(twin) if twin is not None else oracle
