@@ -19,7 +19,7 @@ Control baselines map vehicle observations ``[B, F, 8]`` to commands ``[B, F]`` 
   preview). It reads the twin, not the observation: use :meth:`OracleController.bind` to get
   an observation → command callable. It also works with impaired observation (the command
   waits for the CAM), but its subgradient solver stops well short of the optimum: on
-  perfect observation its cost was 29–42 % above the exact optimum, so it is not a lower
+  perfect observation its cost was 19–42 % above the exact optimum, so it is not a lower
   bound on control cost.
 - ``"exact_oracle"``: :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`, the exact
   minimum of the episode's control cost over the known trace (a linear program solved once
@@ -294,7 +294,7 @@ class OracleController:
     horizon). It is model-predictive control with a preview of the leader trace, and it also
     works with impaired observation (the first command waits for the CAM). It is *not* the
     lower bound on control cost: its subgradient solver stops well short of the optimum of
-    this piecewise-linear objective, and on perfect observation its cost was 29–42 % above
+    this piecewise-linear objective, and on perfect observation its cost was 19–42 % above
     the exact optimum that :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`
     computes (README, Benchmarks), and on the stop-and-go UDDS cycle it did worse than CACC.
 

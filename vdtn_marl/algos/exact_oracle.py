@@ -32,12 +32,12 @@ state). Measured (2 CPU cores, one thread): about 1.2 s per scenario for H = 200
 (tests/algos/test_exact_oracle.py). The loop over scenarios is a Python loop (one LP each),
 outside the simulator's hot path.
 
-On 8 synthetic and 8 UDDS scenarios of 10 s (with the 6 s tail), the exact optimum cost
-0.043 and 0.046 per follower and interval, where
-:class:`~vdtn_marl.algos.baselines.OracleController` (receding-horizon MPC, subgradient
-solver) cost 0.056 and 0.065 (29 % and 42 % more; on UDDS more than CACC's 0.055). That MPC
-is therefore not the lower bound its name suggests; see the README (Benchmarks, control
-cost).
+With the 6 s tail, the exact optimum cost 0.0381 per follower and interval on the 128
+synthetic scenarios of ``benchmarks/training.py`` (where
+:class:`~vdtn_marl.algos.baselines.OracleController`, the receding-horizon MPC with a
+subgradient solver, cost 0.0453: 19 % more), and 0.046 on 8 UDDS scenarios (the MPC: 0.065,
+42 % more, and more than CACC's 0.055). That MPC is therefore not the lower bound its name
+suggests; see the README (Training, VoI and baselines).
 """
 
 from __future__ import annotations
