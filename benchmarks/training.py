@@ -11,17 +11,15 @@ Figures:
   scenarios of ``--traces``) of π* after ``--iterations`` MAPPO iterations (one run per
   ``--pi-seeds`` seed, all evaluated on the same scenarios; mean, best and worst), of linear
   CACC, of the exact oracle (the minimum of the evaluated cost over the known leader trace, a
-  linear program per scenario: the true lower bound), of the MPC oracle (``control=oracle``:
-  receding-horizon, subgradient-solved MPC over the known leader trace) and of the causal MPC
-  (the same MPC without the leader's future); every row's gap to the exact oracle, and π*'s
-  gaps to the MPC oracle (the issue's target: within 10 %) and to the causal MPC. The MPC
-  oracle–causal-MPC gap estimates the value of previewing the leader trace, which π* (it
-  observes only the present) cannot learn. It depends strongly on the scenarios (the causal
-  MPC came out 32 % above the MPC oracle on one set of 32, 8 % on one of 64 and 26 % on one
-  of 128), hence the default of 128;
-- the value of preview: the control cost of the same MPC when it knows only the next
-  ``--preview-s`` seconds of the leader trace (0 s is the causal MPC, the whole 6 s horizon
-  the MPC oracle).
+  linear program per scenario, planned 6 s beyond the evaluated intervals: the lower bound),
+  of the MPC oracle (``control=oracle``: receding 6 s horizon over the known leader trace, 60
+  solver steps per interval, as leaderboard 1.0 runs it) and of the causal MPC
+  (``control=causal_mpc``: the same MPC without the leader's future, 200 solver steps); every
+  row's gap to the exact oracle, and π*'s gaps to the MPC oracle (the issue's target: within
+  10 %) and to the causal MPC. π* observes only the present, so what previewing the leader
+  trace is worth is out of its reach;
+- the value of preview: the control cost of the causal MPC's solver when it knows the next
+  ``--preview-s`` seconds of the leader trace (0 s is the causal MPC).
 """
 
 from __future__ import annotations
@@ -37,7 +35,11 @@ from pathlib import Path
 import torch
 
 from vdtn_marl import __version__
-from vdtn_marl.algos.baselines import ORACLE_HORIZON_INTERVALS, make_control_baseline
+from vdtn_marl.algos.baselines import (
+    CAUSAL_MPC_ITERATIONS,
+    ORACLE_HORIZON_INTERVALS,
+    make_control_baseline,
+)
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
@@ -270,12 +272,18 @@ def main(argv: list[str] | None = None) -> int:
         began_eval = time.perf_counter()
         result = evaluate_system(params, policy, None, **common)
         costs[name] = {**_costs(result), "eval_seconds": time.perf_counter() - began_eval}
-    for preview_s, intervals in previews.items():
-        mpc = make_control_baseline("oracle", params, preview_intervals=intervals)
+    for preview_s, intervals in previews.items():  # the causal MPC's solver, with preview
+        mpc = make_control_baseline(
+            "oracle", params, preview_intervals=intervals, iterations=CAUSAL_MPC_ITERATIONS
+        )
         costs[f"mpc_preview_{preview_s:g}s"] = {
             "preview_s": preview_s,
             **_costs(evaluate_system(params, mpc, None, **common)),
         }
+    rows["mpc_solver_steps_per_interval"] = {
+        "oracle": make_control_baseline("oracle", params).iterations,
+        "causal_mpc_and_previews": CAUSAL_MPC_ITERATIONS,
+    }
     rows["evaluation"] = {
         "episodes": args.episodes,
         "intervals": args.intervals,
