@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from vdtn_marl.algos.baselines import (
+    CAUSAL_MPC_ITERATIONS,
     CONTROL_BASELINES,
     RRA_BASELINES,
     ExactOracleController,
@@ -327,6 +328,7 @@ def test_factories_build_the_named_baselines():
     assert isinstance(make_control_baseline("oracle", params), OracleController)
     causal = make_control_baseline("causal_mpc", params)
     assert isinstance(causal, OracleController) and not causal.leader_preview
+    assert causal.iterations == CAUSAL_MPC_ITERATIONS != OracleController().iterations
     assert make_control_baseline("oracle", params).leader_preview
     exact = make_control_baseline("exact_oracle", params, horizon_intervals=5)
     assert isinstance(exact, ExactOracleController) and exact.horizon_intervals == 5

@@ -44,7 +44,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from vdtn_marl.algos.exact_oracle import ORACLE_HORIZON_INTERVALS, ExactOracleController
+from vdtn_marl.algos.exact_oracle import (
+    ORACLE_HORIZON_INTERVALS,
+    ExactOracleController,
+    check_bound_observation,
+)
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.link import RRA_OBS_GAIN_SCALE_DB
@@ -686,12 +690,7 @@ class _BoundOracle:
 
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
         twin = self.twin
-        expected = (twin.batch_size, twin.num_followers)
-        if tuple(observation.shape[:-1]) != expected:
-            raise ValueError(
-                f"vehicle observation has shape {tuple(observation.shape)}, "
-                f"expected {(*expected, 8)} (the bound twin's batch)"
-            )
+        check_bound_observation(twin, observation)
         switch = None if self.perfect else twin.switch_subframe(perfect=False)
         u = self.oracle(twin, switch)
         obs = torch.as_tensor(observation)

@@ -221,6 +221,16 @@ def _right_hand_sides(
     return b_eq, b_ub
 
 
+def check_bound_observation(twin: DigitalTwin, observation) -> None:
+    """Raise unless ``observation`` is ``[B, F, ...]`` for the bound twin's B and F."""
+    expected = (twin.batch_size, twin.num_followers)
+    if tuple(observation.shape[:-1]) != expected:
+        raise ValueError(
+            f"vehicle observation has shape {tuple(observation.shape)}, "
+            f"expected {(*expected, 8)} (the bound twin's batch)"
+        )
+
+
 def _as_numpy(value) -> np.ndarray:
     return torch.as_tensor(value).detach().to("cpu", torch.float64).numpy()
 
@@ -382,14 +392,9 @@ class _BoundExactOracle:
 
     def __call__(self, observation) -> torch.Tensor:
         twin = self.twin
-        expected = (twin.batch_size, twin.num_followers)
-        if tuple(observation.shape[:-1]) != expected:
-            raise ValueError(
-                f"vehicle observation has shape {tuple(observation.shape)}, "
-                f"expected {(*expected, 8)} (the bound twin's batch)"
-            )
+        check_bound_observation(twin, observation)
         interval = _as_numpy(twin.interval).astype(np.int64)
-        commands = np.empty(expected)
+        commands = np.empty((twin.batch_size, twin.num_followers))
         for b in range(twin.batch_size):  # one LP per scenario, only when a plan starts
             plan = self._plans[b]
             offset = interval[b] - self._start[b]
