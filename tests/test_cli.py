@@ -229,6 +229,8 @@ BAD_CONFIGS = [
     (["algo.num_envs=2.5"], "algo.num_envs=2.5"),
     (["task=nope"], "task='nope'"),
     (["control.warm_start=teacher"], "control.warm_start='teacher'"),
+    (["control=oracle", "control.mpc_iterations=0"], "control.mpc_iterations=0"),
+    (["control.mpc_iterations=50"], "control.mpc_iterations=50"),  # control=learned
     (["algo.validation_scenarios=0"], "algo.validation_scenarios=0"),
     (["rra.kappa1=0,1"], "rra.kappa1=0,1"),
 ]

@@ -18,6 +18,7 @@ from vdtn_marl.sim.params import ConfigError, TwinParams
 
 ALGOS = ("mappo", "ippo")
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
+MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations
 RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
 LEARNED_RRA = ("jocc", "drra", "throughput")
 IVOI_ESTIMATORS = ("td", "rollout")
@@ -105,6 +106,9 @@ class ControlConfig:
     # π* (learned control) before its first PPO stage: "causal_mpc" imitates the causal MPC
     # (DAgger, vdtn_marl.algos.imitation); "none" starts PPO from the CACC prior
     warm_start: str = "none"
+    # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
+    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.algos.baselines)
+    mpc_iterations: int | None = None
 
 
 @dataclass
@@ -188,6 +192,13 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
     _choice("control.warm_start", c.warm_start, WARM_STARTS)
+    if c.mpc_iterations is not None:
+        _positive_int("control.mpc_iterations", c.mpc_iterations, high=100_000)
+        if c.name not in MPC_CONTROLS:
+            raise ConfigError(
+                f"control.mpc_iterations={c.mpc_iterations!r} is allowed only with control="
+                f"{'|'.join(MPC_CONTROLS)}, not control={c.name}; leave it unset (null)"
+            )
     if c.completion == "learned" and not c.completion_predictor:
         raise ConfigError(
             "control.completion_predictor=None: control.completion=learned needs the path of a "

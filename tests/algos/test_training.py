@@ -300,3 +300,15 @@ def test_impaired_control_training_with_kalman_completion(tmp_path):
     assert summary["trainer_iterations"]["pi_tilde"] == 1
     assert 0.0 <= summary["cam_delivery_rate"] <= 1.0
     assert all(p.endswith(".png") for p in summary["plots"])
+
+
+@pytest.mark.parametrize(
+    ("name", "steps", "expected"),
+    [("oracle", None, 400), ("oracle", 60, 60), ("causal_mpc", None, 200), ("causal_mpc", 30, 30)],
+)
+def test_mpc_controls_take_their_solver_steps_from_the_config(tmp_path, name, steps, expected):
+    from vdtn_marl.config import ControlConfig
+
+    cfg = tiny_config(control=ControlConfig(name=name, augmentation=False, mpc_iterations=steps))
+    controller = JointOptimisation(cfg, tmp_path)._control_policy()
+    assert controller.iterations == expected

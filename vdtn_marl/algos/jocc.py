@@ -199,7 +199,9 @@ class JointOptimisation:
         """The acting control policy (π̃ or a control baseline) as obs → commands."""
         if self.control_learned:
             return ActorPolicy(self.pi_tilde.actor, "vehicle")
-        return make_control_baseline(self.cfg.control.name, self.params)
+        control = self.cfg.control
+        solver = {} if control.mpc_iterations is None else {"iterations": control.mpc_iterations}
+        return make_control_baseline(control.name, self.params, **solver)
 
     def _rra_policy(self):
         """The current RRA policy: the learned one once trained (uniformly random before)."""
