@@ -2,6 +2,8 @@
 
     python benchmarks/training.py                      # full run, writes results/training.json
     python benchmarks/training.py --iterations 5 --quick
+    python benchmarks/training.py --warm-starts '' --preview-s '' --fps-iterations 0 \
+        --output benchmarks/results/training_baselines.json  # baselines only: no π*, no frames/s
 
 Figures:
 - MAPPO frames/s (collection + PPO update) on the batched TorchRL face at B scenarios
@@ -12,11 +14,11 @@ Figures:
   ``--pi-seeds`` seed, all evaluated on the same scenarios; mean, best and worst), of linear
   CACC, of the exact oracle (the minimum of the evaluated cost over the known leader trace, a
   linear program per scenario, planned 6 s beyond the evaluated intervals: the lower bound),
-  of the MPC oracle (``control=oracle``: receding 6 s horizon over the known leader trace, 60
-  solver steps per interval, as leaderboard 1.0 runs it) and of the causal MPC
-  (``control=causal_mpc``: the same MPC without the leader's future, 200 solver steps); every
-  row's gap to the exact oracle, and π*'s gaps to the MPC oracle (the issue's target: within
-  10 %) and to the causal MPC. π* observes only the present, so what previewing the leader
+  of the MPC oracle (``control=oracle``: receding 6 s horizon over the known leader trace,
+  ``ORACLE_MPC_ITERATIONS`` = 400 solver steps per interval; leaderboard 1.0 ran 60) and of
+  the causal MPC (``control=causal_mpc``: the same MPC without the leader's future, 200 solver
+  steps); every row's gap to the exact oracle, and π*'s gaps to the MPC oracle (target:
+  within 10 %) and to the causal MPC. π* observes only the present, so what previewing the leader
   trace is worth is out of its reach;
 - the value of preview: the control cost of the causal MPC's solver when it knows the next
   ``--preview-s`` seconds of the leader trace (0 s is the causal MPC).
@@ -26,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import platform
+import shlex
 import statistics
 import sys
 import time
@@ -68,6 +71,28 @@ def frames_per_second(trainer: PPOTrainer, iterations: int) -> dict[str, float]:
     return {"frames_per_s": frames / total_s, "collect_frames_per_s": frames / collect_s}
 
 
+def mappo_frames_per_second(args: argparse.Namespace) -> dict[str, dict]:
+    """MAPPO frames/s on the batched face (B = ``--batch``) and through ``PettingZooWrapper``."""
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    import vdtn_marl
+
+    algo = AlgoConfig(num_envs=args.batch, rollout_steps=50, minibatch_size=4096, epochs=4)
+    env = VDTNTorchRLEnv("control", batch_size=args.batch, device=args.device, seed=args.seed)
+    trainer = PPOTrainer(env, "vehicle", algo, seed=args.seed, prior=CACCController())
+    batched = {"B": args.batch, **frames_per_second(trainer, args.fps_iterations)}
+    wrapped = PettingZooWrapper(
+        vdtn_marl.make("vdtn/platoon-control-v0"), return_state=False, use_mask=False
+    )
+    wrapped_trainer = PPOTrainer(
+        wrapped, "vehicle", replace(algo, minibatch_size=256, rollout_steps=200), seed=args.seed
+    )
+    return {
+        "mappo_batched": batched,
+        "mappo_pettingzoo_wrapper": {"B": 1, **frames_per_second(wrapped_trainer, 2)},
+    }
+
+
 def _preview_intervals(text: str, interval_s: float) -> dict[float, int]:
     """Parse ``--preview-s`` ("0.25,0.5") into {preview s: whole control intervals}."""
     previews = {}
@@ -97,11 +122,11 @@ WARM_STARTS = ("none", "causal_mpc")
 
 
 def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
-    """Parse a comma-separated list of names out of ``allowed``."""
+    """Parse a comma-separated list of names out of ``allowed`` (empty: none)."""
     names = [part.strip() for part in text.split(",") if part.strip()]
     bad = [name for name in names if name not in allowed]
-    if bad or not names:
-        raise SystemExit(f"{flag} {text!r} must list some of {', '.join(allowed)}")
+    if bad:
+        raise SystemExit(f"{flag} {text!r} must list some of {', '.join(allowed)} (or be '')")
     return names
 
 
@@ -178,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--warm-starts",
         default="none,causal_mpc",
-        help="π* variants: none (PPO from the CACC prior), causal_mpc (DAgger, then PPO)",
+        help="π* variants: none (PPO from the CACC prior), causal_mpc (DAgger, then PPO); "
+        "'' for none (only the baselines' rows)",
     )
     parser.add_argument("--lmbda", type=float, default=None, help="GAE λ of π* (default: config)")
     parser.add_argument(
@@ -199,7 +225,9 @@ def main(argv: list[str] | None = None) -> int:
         help="leader trace set of π*'s training and of the evaluation (synthetic, udds, hwfet, "
         "...; udds and hwfet need the data extra)",
     )
-    parser.add_argument("--fps-iterations", type=int, default=5)
+    parser.add_argument(
+        "--fps-iterations", type=int, default=5, help="MAPPO iterations timed (0: no frames/s)"
+    )
     parser.add_argument("--episodes", type=int, default=128, help="evaluation scenarios")
     parser.add_argument("--intervals", type=int, default=200, help="evaluation intervals")
     parser.add_argument("--device", default="cpu")
@@ -219,22 +247,10 @@ def main(argv: list[str] | None = None) -> int:
     rows: dict[str, object] = {}
     previews = _preview_intervals(args.preview_s, TwinParams().platoon.control_interval_s)
 
-    algo = AlgoConfig(num_envs=args.batch, rollout_steps=50, minibatch_size=4096, epochs=4)
-    env = VDTNTorchRLEnv("control", batch_size=args.batch, device=args.device, seed=args.seed)
-    trainer = PPOTrainer(env, "vehicle", algo, seed=args.seed, prior=CACCController())
-    rows["mappo_batched"] = {"B": args.batch, **frames_per_second(trainer, args.fps_iterations)}
-
-    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
-
-    import vdtn_marl
-
-    wrapped = PettingZooWrapper(
-        vdtn_marl.make("vdtn/platoon-control-v0"), return_state=False, use_mask=False
-    )
-    wrapped_trainer = PPOTrainer(
-        wrapped, "vehicle", replace(algo, minibatch_size=256, rollout_steps=200), seed=args.seed
-    )
-    rows["mappo_pettingzoo_wrapper"] = {"B": 1, **frames_per_second(wrapped_trainer, 2)}
+    if args.fps_iterations < 0:
+        raise SystemExit(f"--fps-iterations {args.fps_iterations} must be >= 0")
+    if args.fps_iterations:
+        rows.update(mappo_frames_per_second(args))
 
     # π* (one per training seed) against CACC and the MPCs on held-out scenarios (perfect
     # observation), all on the same scenarios
@@ -314,6 +330,8 @@ def main(argv: list[str] | None = None) -> int:
 
     print(f"{'figure':<50} value")
     for key in ("mappo_batched", "mappo_pettingzoo_wrapper"):
+        if key not in rows:  # --fps-iterations 0
+            continue
         r = rows[key]
         print(f"{key + ' frames/s (B=' + str(r['B']) + ')':<50} {r['frames_per_s']:,.0f}")
         print(f"{key + ' collection frames/s':<50} {r['collect_frames_per_s']:,.0f}")
@@ -334,7 +352,7 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_json(
             args.output,
             {
-                "command": "python " + " ".join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+                "command": "python " + shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
                 "vdtn_marl_version": __version__,
                 "torch": torch.__version__,
                 "machine": f"{platform.processor() or platform.machine()}, "
