@@ -291,12 +291,14 @@ def _intra_op_threads(threads: int | None, device: torch.device):
 ORACLE_MPC_ITERATIONS = 400
 """Adam steps per interval of the oracle (:class:`OracleController`'s default, ``control=oracle``).
 
-On perfect observation, held-out synthetic scenarios × 10 s (evaluation seed 10⁹), against the
-exact optimum of :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`: 32 scenarios,
-200 steps +3.8 %, 400 steps +0.26 % (0.02887 vs 0.02879; 110 s for the 32 scenarios on one
-CPU thread); 128 scenarios (``benchmarks/training.py``), 60 steps +18.6 %. On 16 scenarios of
-the stop-and-go UDDS cycle (data extra), 400 steps +3.6 % (0.01758 vs 0.01698); 60 steps
-were 42 % above on 8 and worse than CACC. Leaderboard 1.0 and
+On perfect observation, held-out scenarios × 10 s, against the exact optimum of
+:class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`: 128 synthetic scenarios
+(``benchmarks/training.py``), 400 steps +1.3 % (0.03862 vs 0.03814; 408 s on one CPU thread)
+and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps +3.8 %, 400 steps +0.26 % (0.02887 vs
+0.02879); 16 scenarios of the stop-and-go UDDS cycle (data extra), 400 steps +3.6 % (0.01758
+vs 0.01698), where 60 steps were 42 % above on 8 and worse than CACC. The 400-step figures
+come from ``python benchmarks/training.py --warm-starts '' --preview-s '' --fps-iterations 0
+--episodes N [--traces udds] --quick``. Leaderboard 1.0 and
 reduced 2.0 ran 60 steps (``control.mpc_iterations=60`` reproduces them)."""
 
 CAUSAL_MPC_ITERATIONS = 200
