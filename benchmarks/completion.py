@@ -29,7 +29,6 @@ import datetime as dt
 import math
 import os
 import platform
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -38,7 +37,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.envs.policies import RandomRRAPolicy
-from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.runs import atomic_write_json, script_command
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import (
     CAM_ACCEL,
@@ -261,7 +260,7 @@ def main(argv=None) -> int:
 
     payload = {
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
+        "command": script_command(),
         "argv": sys.argv[1:] if argv is None else list(argv),
         "torch_version": torch.__version__,
         "numpy_version": np.__version__,

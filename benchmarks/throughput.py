@@ -31,7 +31,6 @@ import argparse
 import datetime as dt
 import os
 import platform
-import shlex
 import sys
 import time
 from pathlib import Path
@@ -39,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.runs import atomic_write_json, script_command
 
 TARGET_ENV_SUBFRAMES_PER_S = 10_000.0
 TARGET_CORE_AGENT_STEPS_PER_S = 1_000_000.0
@@ -323,7 +322,7 @@ def main(argv=None) -> int:
     cuda_names = [torch.cuda.get_device_name(i) for i in range(torch.cuda.device_count())]
     payload = {
         "date": dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"),
-        "command": " ".join(shlex.quote(a) for a in [sys.executable, *sys.argv]),
+        "command": script_command(),
         "argv": sys.argv[1:] if argv is None else list(argv),
         "torch_version": torch.__version__,
         "numpy_version": np.__version__,

@@ -28,9 +28,7 @@ from __future__ import annotations
 
 import argparse
 import platform
-import shlex
 import statistics
-import sys
 import time
 from dataclasses import asdict, replace
 from pathlib import Path
@@ -49,7 +47,7 @@ from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.data import trace_source_names
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.runs import atomic_write_json, progress
+from vdtn_marl.runs import atomic_write_json, progress, script_command
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 
@@ -352,7 +350,7 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_json(
             args.output,
             {
-                "command": "python " + shlex.join([Path(sys.argv[0]).name, *sys.argv[1:]]),
+                "command": script_command(),
                 "vdtn_marl_version": __version__,
                 "torch": torch.__version__,
                 "machine": f"{platform.processor() or platform.machine()}, "

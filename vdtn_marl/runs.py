@@ -12,6 +12,8 @@ import io
 import json
 import math
 import os
+import shlex
+import sys
 import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -59,6 +61,12 @@ def _json_safe(value: Any) -> Any:
     if hasattr(value, "item") and callable(value.item):  # numpy / torch scalars
         return _json_safe(value.item())
     return value
+
+
+def script_command() -> str:
+    """The running script's command line as a user would type it: ``python <argv...>``, shell-
+    quoted, without the interpreter's path (which names one machine's environment)."""
+    return "python " + shlex.join(sys.argv)
 
 
 def atomic_write_json(path: str | Path, data: Any) -> Path:
