@@ -218,6 +218,7 @@ BAD_CONFIGS = [
     (["algo.num_envs=0"], "algo.num_envs=0"),
     (["algo.lr_schedule=cosine"], "algo.lr_schedule='cosine'"),
     (["algo.validate_every=-1"], "algo.validate_every=-1"),
+    (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
     (["scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.model.foo=1"], "scenario.model.foo=1"),

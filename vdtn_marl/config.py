@@ -72,7 +72,8 @@ class AlgoConfig:
     lr_schedule: str = "constant"  # linear: decays to 0 over each training stage
     gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)
     rra_gamma: float = 0.99  # RRA agents: discount per subframe (horizon ≈ 100 ms)
-    lmbda: float = 0.95
+    lmbda: float = 0.95  # GAE λ of the vehicles (per control interval)
+    rra_lmbda: float = 0.95  # GAE λ of the RRA agents (per subframe)
     clip_epsilon: float = 0.2
     entropy_coef: float = 1e-3
     initial_log_scale: float = -3.0  # log std (pre-tanh) of the initial acceleration policy
@@ -236,6 +237,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("algo.rra_gamma", a.rra_gamma, 0.0, 1.0)
     _real("algo.initial_log_scale", a.initial_log_scale, -10.0, 2.0)
     _real("algo.lmbda", a.lmbda, 0.0, 1.0)
+    _real("algo.rra_lmbda", a.rra_lmbda, 0.0, 1.0)
     _real("algo.clip_epsilon", a.clip_epsilon, 0.0, 1.0, low_open=True)
     _real("algo.entropy_coef", a.entropy_coef, 0.0, 1e3)
     _real("algo.critic_coef", a.critic_coef, 0.0, 1e3)

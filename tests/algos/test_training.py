@@ -310,5 +310,16 @@ def test_mpc_controls_take_their_solver_steps_from_the_config(tmp_path, name, st
     from vdtn_marl.config import ControlConfig
 
     cfg = tiny_config(control=ControlConfig(name=name, augmentation=False, mpc_iterations=steps))
-    controller = JointOptimisation(cfg, tmp_path)._control_policy()
+    controller = JointOptimisation(cfg, tmp_path).control_policy()
     assert controller.iterations == expected
+
+
+def test_each_group_gets_the_gae_lambda_and_discount_of_its_clock(tmp_path):
+    algo = replace(TINY_ALGO, lmbda=0.9, rra_lmbda=0.99, gamma=0.98, rra_gamma=0.97)
+    loop = JointOptimisation(tiny_config(algo=algo), tmp_path)
+    for name, (gamma, lmbda) in {
+        "pi_star": (0.98, 0.9), "pi_tilde": (0.98, 0.9), "rra": (0.97, 0.99),
+    }.items():  # fmt: skip
+        estimator = loop.trainers()[name].loss.value_estimator
+        assert float(estimator.gamma) == pytest.approx(gamma), name
+        assert float(estimator.lmbda) == pytest.approx(lmbda), name

@@ -104,3 +104,40 @@ def test_bad_estimator_arguments_raise():
         TDIVoIEstimator(value=lambda o: o[..., 0], discount=1.5)
     with pytest.raises(ValueError, match="EVoI pairs"):
         expected_voi(torch.zeros(3), torch.zeros(4))
+
+
+def test_ivoi_is_split_by_cam_delivery_of_the_followers_own_link():
+    """ξ_i := 1 when follower i's CAM (link i) missed its interval, else 0: the split must put
+    every 0 under 'delivered' and every 1 under 'lost', scenario by scenario."""
+    params = TwinParams.from_overrides(episode_intervals=10)
+    t = params.platoon.subframes_per_interval
+
+    def lost_indicator(twin, record):
+        return (record.cam_delay_subframes > t).float()
+
+    result = evaluate_system(
+        params, CACCController(params.platoon), None, perfect=False, episodes=6, intervals=10,
+        seed=5, gamma=1.0, ivoi_estimator=lost_indicator,
+    )  # fmt: skip
+    delivered, lost = result.ivoi_delivered, result.ivoi_lost
+    assert delivered.shape == lost.shape == (6,)
+    # the random RRA policy loses some CAMs and delivers some in every scenario
+    assert torch.isfinite(delivered).all() and torch.isfinite(lost).all()
+    torch.testing.assert_close(delivered, torch.zeros(6, dtype=torch.float64))
+    torch.testing.assert_close(lost, torch.ones(6, dtype=torch.float64))
+    assert result.metrics["ivoi_mean_delivered"] == 0.0
+    assert result.metrics["ivoi_mean_lost"] == 1.0
+    # with γ = 1, Σ_k ξ_k counts the lost CAMs: their share is the measured loss rate
+    assert result.metrics["collision_rate"] == 0.0
+    loss_rate = float(result.ivoi_sums.double().mean()) / 10
+    assert loss_rate == pytest.approx(1.0 - result.metrics["cam_delivery_rate"], rel=1e-5)
+
+
+def test_perfect_observation_without_radio_has_no_delivery_split():
+    params = TwinParams.from_overrides(episode_intervals=5)
+    result = evaluate_system(
+        params, CACCController(params.platoon), None, perfect=True, episodes=2, intervals=5,
+        seed=5, ivoi_estimator=lambda twin, record: torch.zeros_like(record.reward),
+    )  # fmt: skip
+    assert result.ivoi_delivered is None and result.ivoi_lost is None
+    assert "ivoi_mean_lost" not in result.metrics

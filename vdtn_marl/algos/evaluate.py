@@ -32,7 +32,11 @@ class EvalResult:
     """Per-scenario returns (for paired statistics) and aggregate metrics of one evaluation.
 
     ``returns`` [B]: discounted control return, mean over followers. ``ivoi_sums`` [B]:
-    Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given). ``metrics``: plain
+    Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given). ``ivoi_delivered``
+    and ``ivoi_lost`` [B] (IVoI estimator and radio): per scenario, the mean ξ over the
+    follower-intervals whose CAM was delivered within its interval / was not (NaN where there
+    were none); a VoI reward that teaches CAM delivery needs the first above the second.
+    ``metrics``: plain
     floats, keys with units (see :data:`METRIC_DOC`). ``traces``: per-interval mean |gap error|
     (m) and |speed error| (m/s) of scenario 0's followers, [K, F] each, when requested.
     """
@@ -40,6 +44,8 @@ class EvalResult:
     returns: torch.Tensor
     metrics: dict[str, float]
     ivoi_sums: torch.Tensor | None = None
+    ivoi_delivered: torch.Tensor | None = None
+    ivoi_lost: torch.Tensor | None = None
     traces: dict[str, torch.Tensor] = field(default_factory=dict)
     cam_latency_ms: torch.Tensor | None = None  # every delivered CAM's latency (for CDFs)
 
@@ -55,7 +61,31 @@ METRIC_DOC = {
     "cam_latency_ms_p50": "median latency of delivered CAMs (ms)",
     "cam_latency_ms_p95": "95th percentile latency of delivered CAMs (ms)",
     "v2i_throughput_mbps_per_link": "mean V2I rate per V2I link (Mbps)",
+    "ivoi_mean_delivered": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was "
+    "delivered within its interval",
+    "ivoi_mean_lost": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was not",
 }
+
+
+class _MaskedMean:
+    """Per-scenario sums and counts of the masked entries of [B, F] values."""
+
+    def __init__(self, batch: int, device: torch.device):
+        self.total = torch.zeros(batch, dtype=torch.float64, device=device)
+        self.count = torch.zeros(batch, dtype=torch.float64, device=device)
+
+    def add(self, values: torch.Tensor, mask: torch.Tensor) -> None:
+        self.total += torch.where(mask, values, torch.zeros_like(values)).sum(-1)
+        self.count += mask.double().sum(-1)
+
+    def per_scenario(self) -> torch.Tensor:
+        """Mean per scenario [B] (NaN where nothing was added)."""
+        return torch.where(self.count > 0, self.total / self.count.clamp(min=1), torch.nan)
+
+    def pooled(self) -> float:
+        """Mean over every added entry (NaN if none)."""
+        count = float(self.count.sum())
+        return float(self.total.sum()) / count if count else float("nan")
 
 
 def _bind(policy, twin: DigitalTwin):
@@ -119,6 +149,8 @@ def evaluate_system(
     v2i_sum = torch.zeros((), dtype=torch.float64, device=dev)
     cams_sent = torch.zeros((), dtype=torch.float64, device=dev)
     cams_delivered = torch.zeros((), dtype=torch.float64, device=dev)
+    xi_delivered = _MaskedMean(b, dev)
+    xi_lost = _MaskedMean(b, dev)
     latencies = []
     gap_trace, speed_trace = [], []
     t = params.platoon.subframes_per_interval
@@ -139,7 +171,12 @@ def evaluate_system(
         reward = record.reward.double()
         returns += weight * live * reward
         if ivoi_estimator is not None:
-            ivoi_sums += weight * live * ivoi_estimator(twin, record).double()
+            xi = ivoi_estimator(twin, record).double()
+            ivoi_sums += weight * live * xi
+            if radio:  # link i carries follower i's CAM
+                lost = record.cam_delay_subframes > t
+                xi_delivered.add(xi, alive[:, None] & ~lost)
+                xi_lost.add(xi, alive[:, None] & lost)
         reward_sum += (live * reward).sum()
         gap_sum += (live * record.gap_error_m.abs().double()).sum()
         speed_sum += (live * record.speed_error_mps.abs().double()).sum()
@@ -179,6 +216,10 @@ def evaluate_system(
                 cam_latency_ms_p95=float("nan"),
             )
         metrics["v2i_throughput_mbps_per_link"] = float(v2i_sum / live_intervals / 1e6)
+        if ivoi_estimator is not None:
+            metrics["ivoi_mean_delivered"] = xi_delivered.pooled()
+            metrics["ivoi_mean_lost"] = xi_lost.pooled()
+    by_delivery = radio and ivoi_estimator is not None
     traces = {}
     if record_traces:
         traces = {
@@ -189,6 +230,8 @@ def evaluate_system(
         returns=returns.mean(-1).float().cpu(),
         metrics=metrics,
         ivoi_sums=ivoi_sums.mean(-1).float().cpu() if ivoi_estimator is not None else None,
+        ivoi_delivered=xi_delivered.per_scenario().cpu() if by_delivery else None,
+        ivoi_lost=xi_lost.per_scenario().cpu() if by_delivery else None,
         traces=traces,
         cam_latency_ms=latency.cpu() if radio else None,
     )

@@ -49,7 +49,7 @@ from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
-from vdtn_marl.config import RunConfig, to_dict, validate
+from vdtn_marl.config import IVOI_ESTIMATORS, RunConfig, to_dict, validate
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
@@ -153,22 +153,13 @@ class JointOptimisation:
             drop_features=drop,
             prior=cacc,
         )
-        v_star = CriticValue(self.pi_star.critic, "vehicle")
-        if rra.ivoi_estimator == "td":
-            self.estimator = TDIVoIEstimator(v_star, self.gamma)
-        else:
-            self.estimator = RolloutIVoIEstimator(
-                ActorPolicy(self.pi_star.actor, "vehicle"),
-                horizon_intervals=10,
-                discount=self.gamma,
-                terminal_value=v_star,
-            )
+        self.estimator = self.ivoi_estimator(rra.ivoi_estimator)
         self.rra = None
         if self.rra_learned:
             rra_env = VDTNTorchRLEnv(
                 "rra",
                 **{**env_kw, "batch_size": algo.rra_num_envs},
-                control_module=SwitchablePolicy(self._control_policy()),
+                control_module=SwitchablePolicy(self.control_policy()),
                 reward=rra.name,
                 kappa1=rra.kappa1,
                 kappa2=rra.kappa2_value,
@@ -188,6 +179,7 @@ class JointOptimisation:
                 seed=cfg.seed * 8 + 2,
                 rollout_steps=algo.rra_rollout_steps,
                 gamma=algo.rra_gamma,
+                lmbda=algo.rra_lmbda,
             )
         self.position = {"iteration": 0, "stage": 0, "stage_start": None}
         self.train_log = MetricsLog(self.run_dir, tensorboard=True)
@@ -195,7 +187,7 @@ class JointOptimisation:
         self.last_evaluation: dict[str, Any] | None = None
 
     # ------------------------------------------------------------------ policies
-    def _control_policy(self):
+    def control_policy(self):
         """The acting control policy (π̃ or a control baseline) as obs → commands."""
         if self.control_learned:
             return ActorPolicy(self.pi_tilde.actor, "vehicle")
@@ -203,7 +195,7 @@ class JointOptimisation:
         solver = {} if control.mpc_iterations is None else {"iterations": control.mpc_iterations}
         return make_control_baseline(control.name, self.params, **solver)
 
-    def _rra_policy(self):
+    def rra_policy(self):
         """The current RRA policy: the learned one once trained (uniformly random before)."""
         if self.rra_learned:
             if self.rra.iteration == 0:
@@ -216,6 +208,21 @@ class JointOptimisation:
         if self.rra is not None:
             out["rra"] = self.rra
         return out
+
+    def ivoi_estimator(self, name: str):
+        """The IVoI estimator ``name`` on π*: ``td`` (π*'s critic as v*) or ``rollout`` (π*
+        for 10 intervals, then its critic). It reads the trainers' current weights."""
+        v_star = CriticValue(self.pi_star.critic, "vehicle")
+        if name == "td":
+            return TDIVoIEstimator(v_star, self.gamma)
+        if name == "rollout":
+            return RolloutIVoIEstimator(
+                ActorPolicy(self.pi_star.actor, "vehicle"),
+                horizon_intervals=10,
+                discount=self.gamma,
+                terminal_value=v_star,
+            )
+        raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
 
     # ------------------------------------------------------------------ checkpoints
     @property
@@ -289,7 +296,7 @@ class JointOptimisation:
         if trainer is None or budget == 0:
             return
         if stage == "control_impaired":
-            self.rra_slot.policy = self._rra_policy()
+            self.rra_slot.policy = self.rra_policy()
         if self.position["stage_start"] is None:
             if stage == "control_perfect" and trainer.iteration == 0:
                 self._warm_start_pi_star()
@@ -352,8 +359,8 @@ class JointOptimisation:
         else:
             acting: EvalResult = evaluate_system(
                 self.params,
-                self._control_policy(),
-                self._rra_policy(),
+                self.control_policy(),
+                self.rra_policy(),
                 perfect=False,
                 ivoi_estimator=self.estimator,
                 record_traces=True,

@@ -80,6 +80,7 @@ class PPOTrainer:
             :mod:`~vdtn_marl.algos.networks`), e.g. the linear CACC controller.
         rollout_steps: steps per scenario per batch (default ``algo.rollout_steps``).
         gamma: discount per step of the group's clock (default ``algo.gamma``).
+        lmbda: GAE λ per step of the group's clock (default ``algo.lmbda``).
     """
 
     def __init__(
@@ -92,6 +93,7 @@ class PPOTrainer:
         prior=None,
         rollout_steps: int | None = None,
         gamma: float | None = None,
+        lmbda: float | None = None,
     ):
         self.env = env
         self.group = group
@@ -139,7 +141,8 @@ class PPOTrainer:
             terminated=(group, "terminated"),
         )
         self.gamma = algo.gamma if gamma is None else gamma
-        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=self.gamma, lmbda=algo.lmbda)
+        self.lmbda = algo.lmbda if lmbda is None else lmbda
+        self.loss.make_value_estimator(ValueEstimators.GAE, gamma=self.gamma, lmbda=self.lmbda)
         self.optimizer = torch.optim.Adam(self.loss.parameters(), lr=algo.lr)
         self.iteration = 0
         self.scaling_fitted = False

@@ -1,0 +1,317 @@
+"""IVoI signal: does the VoI reward that JOCC gives the RRA agents favour CAM delivery?
+
+JOCC's RRA agent of link i earns κ2·s_ξ·ξ_i at the end of each control interval, ξ_i the IVoI
+of follower i (docs/model.md §5). That term can only teach an RRA agent to deliver CAMs if ξ is
+higher, in expectation, on the intervals whose CAM was delivered than on those whose CAM was
+lost. This script measures it for trained JOCC runs.
+
+For every checkpoint (a run's ``checkpoints/last.pt``; its config comes from the checkpoint)
+it loads π*, π̃ (or the run's control baseline) and, if the run learned one, the RRA policy,
+then evaluates the acting system on the run's held-out scenarios (the evaluation seed of the
+run) under each RRA policy of ``--rra`` (``learned`` is the run's own RRA policy) with each
+IVoI estimator of ``--estimators`` (``td``: π*'s critic; ``rollout``: π* for 10 intervals,
+then the critic). Reported per checkpoint × RRA policy × estimator:
+
+- CAM delivery rate, collision rate (fraction of scenarios), control cost;
+- EVoI = J̃ − J* (discounted control return per follower, paired by scenario) and the IVoI
+  sum Σ_k γ^k ξ_k of the same evaluation, each with its 95% CI over scenarios; the VoI
+  identity says they agree in expectation for the true advantage of π*, so a gap between
+  them is the estimator's bias (a critic trained for a few iterations, a truncated rollout);
+- mean ξ over the follower-intervals whose CAM was delivered within its interval and over
+  those whose CAM was not, and the difference delivered − lost, paired by scenario (the
+  scenarios with both), each with its 95% CI over scenarios. ξ is unscaled (reward units of
+  the control reward; the RRA reward multiplies it by κ2·s_ξ).
+
+Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the committed JSON):
+
+    python benchmarks/ivoi_signal.py \\
+        outputs/bench/reduced-v2.1/platoon4/jocc_k050/seed{0,1,2,3,4}/checkpoints/last.pt
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import platform
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import torch
+from rich.console import Console
+from rich.table import Table
+
+from vdtn_marl import __version__
+from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
+from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
+from vdtn_marl.algos.evaluate import evaluate_system
+from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
+from vdtn_marl.algos.ppo import ActorPolicy
+from vdtn_marl.config import IVOI_ESTIMATORS, from_dict
+from vdtn_marl.runs import atomic_write_json, script_command
+from vdtn_marl.voi import expected_voi, mean_ci
+
+RESULTS = Path("benchmarks/results/ivoi_signal.json")
+LEARNED = "learned"
+
+
+def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
+    names = [name.strip() for name in text.split(",") if name.strip()]
+    bad = [name for name in names if name not in allowed]
+    if bad or not names:
+        raise SystemExit(f"{flag} {text!r}: each name must be one of {', '.join(allowed)}")
+    return names
+
+
+def _ci(samples: torch.Tensor) -> dict[str, float | int]:
+    """Mean with its 95% CI over the finite per-scenario samples."""
+    finite = samples[torch.isfinite(samples)]
+    if finite.numel() == 0:
+        return {"mean": float("nan"), "low": float("nan"), "high": float("nan"), "n": 0}
+    mean, low, high = mean_ci(finite)
+    return {"mean": mean, "low": low, "high": high, "n": int(finite.numel())}
+
+
+def load_run(path: Path, scratch: Path) -> JointOptimisation:
+    """The JOCC loop of a checkpoint, with every trainer's weights loaded; its run directory
+    is ``scratch`` (nothing is written next to the checkpoint)."""
+    payload = load_checkpoint(path)
+    try:
+        cfg = from_dict(payload["config"])
+    except (KeyError, TypeError) as err:
+        raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
+    cfg.threads = 0  # the caller sets the threads
+    loop = JointOptimisation(cfg, scratch, task="jocc")
+    loop.load_policies(payload)
+    return loop
+
+
+def measure(
+    loop: JointOptimisation, rra_names: list[str], estimators: list[str], episodes: int
+) -> list[dict]:
+    """One row per RRA policy × estimator for the loaded run (see the module doc)."""
+    cfg = loop.cfg
+    common = dict(
+        episodes=episodes, intervals=cfg.experiment.eval_intervals,
+        seed=EVAL_SEED_OFFSET + cfg.seed, gamma=loop.gamma, device=loop.device,
+        trace_source=loop.eval_traces,
+    )  # fmt: skip
+    optimal = evaluate_system(
+        loop.params, ActorPolicy(loop.pi_star.actor, "vehicle"), None, perfect=True, **common
+    )
+    rows = []
+    for rra_name in rra_names:
+        if rra_name == LEARNED and not cfg.rra.learned:
+            continue  # a run with a fixed RRA policy has no learned one
+        for estimator in estimators:
+            began = time.perf_counter()
+            # a fresh policy per evaluation: the random one replays the same draws
+            rra_policy = (
+                loop.rra_policy()
+                if rra_name == LEARNED
+                else make_rra_baseline(rra_name, loop.params, cfg.seed)
+            )
+            acting = evaluate_system(
+                loop.params,
+                loop.control_policy(),
+                rra_policy,
+                perfect=False,
+                ivoi_estimator=loop.ivoi_estimator(estimator),
+                completion=loop.completion,
+                **common,
+            )
+            evoi, low, high = expected_voi(acting.returns, optimal.returns)
+            m = acting.metrics
+            rows.append(
+                {
+                    "rra": f"{cfg.rra.name} ({LEARNED})" if rra_name == LEARNED else rra_name,
+                    "estimator": estimator,
+                    "cam_delivery_rate": m["cam_delivery_rate"],
+                    "collision_rate": m["collision_rate"],
+                    "control_cost": m["control_cost"],
+                    "evoi": {"mean": evoi, "low": low, "high": high, "n": episodes},
+                    "ivoi_sum": _ci(acting.ivoi_sums.double()),
+                    "ivoi_delivered": _ci(acting.ivoi_delivered),
+                    "ivoi_lost": _ci(acting.ivoi_lost),
+                    "ivoi_delivered_minus_lost": _ci(acting.ivoi_delivered - acting.ivoi_lost),
+                    "seconds": time.perf_counter() - began,
+                }
+            )
+    return rows
+
+
+def _fmt(stat: dict) -> str:
+    if stat["n"] == 0:
+        return "-"
+    if stat["n"] == 1:
+        return f"{stat['mean']:+.3g}"
+    return f"{stat['mean']:+.3g} [{stat['low']:+.3g}, {stat['high']:+.3g}]"
+
+
+def print_table(runs: list[dict], console: Console) -> None:
+    table = Table(title="IVoI signal (ξ unscaled; 95% CIs over scenarios)")
+    for column in (
+        "run", "RRA", "estimator", "CAM delivery", "collisions", "EVoI", "Σγᵏξ",
+        "ξ | delivered", "ξ | lost", "delivered − lost",
+    ):  # fmt: skip
+        table.add_column(column, justify="left" if column in ("run", "RRA") else "right")
+    for run in runs:
+        for row in run["rows"]:
+            table.add_row(
+                f"{run['scenario']} seed {run['seed']}",
+                row["rra"],
+                row["estimator"],
+                f"{row['cam_delivery_rate']:.3f}",
+                f"{row['collision_rate']:.3f}",
+                _fmt(row["evoi"]),
+                _fmt(row["ivoi_sum"]),
+                _fmt(row["ivoi_delivered"]),
+                _fmt(row["ivoi_lost"]),
+                _fmt(row["ivoi_delivered_minus_lost"]),
+            )
+    console.print(table)
+
+
+def summarise(runs: list[dict]) -> list[dict]:
+    """Per run kind (scenario, RRA reward) × RRA policy × estimator, over the runs (seeds):
+    the mean of each figure, and how many runs' delivered − lost CI lies above / below 0."""
+    groups: dict[tuple, list[dict]] = {}
+    for run in runs:
+        for row in run["rows"]:
+            key = (run["scenario"], run["rra_reward"], row["rra"], row["estimator"])
+            groups.setdefault(key, []).append(row)
+    summary = []
+    for (scenario, reward, rra, estimator), rows in groups.items():
+        diffs = [r["ivoi_delivered_minus_lost"] for r in rows]
+        diffs = [d for d in diffs if d["n"]]
+        summary.append(
+            {
+                "scenario": scenario,
+                "rra_reward": reward,
+                "rra": rra,
+                "estimator": estimator,
+                "runs": len(rows),
+                **{
+                    key: statistics.fmean(_value(r[key]) for r in rows)
+                    for key in (
+                        "cam_delivery_rate",
+                        "collision_rate",
+                        "evoi",
+                        "ivoi_sum",
+                        "ivoi_delivered",
+                        "ivoi_lost",
+                    )  # fmt: skip
+                },
+                "ivoi_delivered_minus_lost": (
+                    statistics.fmean(d["mean"] for d in diffs) if diffs else float("nan")
+                ),
+                "runs_delivered_above_lost": sum(d["n"] > 1 and d["low"] > 0 for d in diffs),
+                "runs_delivered_below_lost": sum(d["n"] > 1 and d["high"] < 0 for d in diffs),
+            }
+        )
+    return summary
+
+
+def _value(figure) -> float:
+    return figure["mean"] if isinstance(figure, dict) else figure
+
+
+def print_summary(summary: list[dict], console: Console) -> None:
+    title = "IVoI signal, mean over runs (runs whose delivered − lost CI is above / below 0)"
+    table = Table(title=title)
+    for column in (
+        "runs of", "RRA", "estimator", "runs", "CAM delivery", "collisions", "EVoI", "Σγᵏξ",
+        "ξ | delivered", "ξ | lost", "delivered − lost", "above / below 0",
+    ):  # fmt: skip
+        table.add_column(column, justify="left" if column in ("runs of", "RRA") else "right")
+    for row in summary:
+        table.add_row(
+            f"{row['scenario']} {row['rra_reward']}",
+            row["rra"],
+            row["estimator"],
+            str(row["runs"]),
+            f"{row['cam_delivery_rate']:.3f}",
+            f"{row['collision_rate']:.3f}",
+            f"{row['evoi']:+.3g}",
+            f"{row['ivoi_sum']:+.3g}",
+            f"{row['ivoi_delivered']:+.3g}",
+            f"{row['ivoi_lost']:+.3g}",
+            f"{row['ivoi_delivered_minus_lost']:+.3g}",
+            f"{row['runs_delivered_above_lost']} / {row['runs_delivered_below_lost']}",
+        )
+    console.print(table)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("checkpoints", nargs="+", type=Path, help="JOCC checkpoints (.pt)")
+    parser.add_argument(
+        "--rra",
+        default=",".join((LEARNED, "greedy", "random")),
+        help=f"RRA policies, from {LEARNED}, {', '.join(RRA_BASELINES)}",
+    )
+    parser.add_argument(
+        "--estimators", default="td,rollout", help=f"IVoI estimators: {', '.join(IVOI_ESTIMATORS)}"
+    )
+    parser.add_argument(
+        "--episodes", type=int, default=64, help="held-out scenarios per evaluation (>= 2)"
+    )
+    parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
+    parser.add_argument("--output", type=Path, default=RESULTS)
+    args = parser.parse_args(argv)
+    rra_names = _choices("--rra", args.rra, (LEARNED, *RRA_BASELINES))
+    estimators = _choices("--estimators", args.estimators, IVOI_ESTIMATORS)
+    if args.episodes < 2:
+        raise SystemExit(f"--episodes {args.episodes} must be >= 2 (confidence intervals)")
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    console = Console()
+    if not console.is_terminal:  # a log file: wide enough for the table
+        console = Console(width=240)
+    began = time.perf_counter()
+    runs = []
+    scratch = tempfile.TemporaryDirectory(prefix="ivoi_signal_")
+    for number, path in enumerate(args.checkpoints):
+        try:
+            loop = load_run(path, Path(scratch.name) / f"run{number}")
+        except CheckpointError as err:
+            raise SystemExit(str(err)) from err
+        console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
+        runs.append(
+            {
+                "checkpoint": str(path),
+                "scenario": loop.cfg.scenario.name,
+                "seed": loop.cfg.seed,
+                "rra_reward": loop.cfg.rra.name,
+                "kappa1": loop.cfg.rra.kappa1,
+                "ivoi_scale": loop.cfg.rra.ivoi_scale,
+                "rows": measure(loop, rra_names, estimators, args.episodes),
+            }
+        )
+    scratch.cleanup()
+    print_table(runs, console)
+    summary = summarise(runs)
+    print_summary(summary, console)
+    atomic_write_json(
+        args.output,
+        {
+            "benchmark": "ivoi_signal",
+            "command": script_command(),
+            "vdtn_marl": __version__,
+            "written": dt.date.today().isoformat(),
+            "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
+            "python": sys.version.split()[0],
+            "episodes": args.episodes,
+            "seconds": time.perf_counter() - began,
+            "summary": summary,
+            "runs": runs,
+        },
+    )
+    console.print(f"wrote {args.output}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
