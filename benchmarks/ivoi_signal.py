@@ -22,6 +22,11 @@ then the critic). Reported per checkpoint × RRA policy × estimator:
   scenarios with both), each with its 95% CI over scenarios. ξ is unscaled (reward units of
   the control reward; the RRA reward multiplies it by κ2·s_ξ).
 
+Only under ``random`` RRA is a CAM's delivery independent of the platoon's state, so only
+there is delivered − lost the effect of delivery on ξ. Under a learned policy it also
+reflects where the policy delivers (one that delivers when the platoon is in trouble shows a
+lower ξ on delivered CAMs even if delivery helps).
+
 Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the committed JSON):
 
     python benchmarks/ivoi_signal.py \\

@@ -35,7 +35,8 @@ class EvalResult:
     Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given). ``ivoi_delivered``
     and ``ivoi_lost`` [B] (IVoI estimator and radio): per scenario, the mean ξ over the
     follower-intervals whose CAM was delivered within its interval / was not (NaN where there
-    were none); a VoI reward that teaches CAM delivery needs the first above the second.
+    were none). Under an RRA policy whose deliveries do not depend on the platoon's state
+    (uniformly random) their difference is the effect of delivery on ξ.
     ``metrics``: plain
     floats, keys with units (see :data:`METRIC_DOC`). ``traces``: per-interval mean |gap error|
     (m) and |speed error| (m/s) of scenario 0's followers, [K, F] each, when requested.
