@@ -87,6 +87,12 @@ def load_run(path: Path, scratch: Path) -> JointOptimisation:
         cfg = from_dict(payload["config"])
     except (KeyError, TypeError) as err:
         raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
+    task = payload.get("task")
+    if cfg.control.name == "learned" and task not in ("jocc", "control_impaired"):
+        raise CheckpointError(
+            f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
+            "use a checkpoint of a jocc or control_impaired run"
+        )
     cfg.threads = 0  # the caller sets the threads
     loop = JointOptimisation(cfg, scratch, task="jocc")
     loop.load_policies(payload)

@@ -6,6 +6,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import torch
 
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.config import AlgoConfig, ExperimentConfig, RunConfig, ScenarioConfig
@@ -81,6 +82,12 @@ def test_bad_arguments_name_the_value(checkpoint, tmp_path):
         script.main([str(checkpoint), "--rra", "greedy,bogus"])
     with pytest.raises(SystemExit, match="--episodes 1 must be >= 2"):
         script.main([str(checkpoint), "--episodes", "1"])
+    payload = torch.load(checkpoint, weights_only=True)
+    payload["task"] = "control"
+    control_only = tmp_path / "control.pt"
+    torch.save(payload, control_only)
+    with pytest.raises(SystemExit, match="task='control', which trains no π̃"):
+        script.main([str(control_only), "--output", str(tmp_path / "x.json")])
     broken = tmp_path / "broken.pt"
     broken.write_bytes(b"not a checkpoint")
     with pytest.raises(SystemExit, match="truncated or not a vdtn-marl checkpoint"):
