@@ -27,7 +27,10 @@ there is delivered − lost the effect of delivery on ξ. Under a learned policy
 reflects where the policy delivers (one that delivers when the platoon is in trouble shows a
 lower ξ on delivered CAMs even if delivery helps).
 
-Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the committed JSON):
+``--reward weight_jerk=0`` (repeatable; ``weight_speed``, ``weight_accel``, ``weight_jerk``,
+``collision_penalty``) evaluates the same policies with other control-reward weights, so that
+returns, EVoI and ξ leave that term out: it shows which term of the reward a difference comes
+from. Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the committed JSON):
 
     python benchmarks/ivoi_signal.py \\
         outputs/bench/reduced-v2.1/platoon4/jocc_k050/seed{0,1,2,3,4}/checkpoints/last.pt
@@ -56,10 +59,13 @@ from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.config import IVOI_ESTIMATORS, from_dict
 from vdtn_marl.runs import atomic_write_json, script_command
+from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi, mean_ci
 
 RESULTS = Path("benchmarks/results/ivoi_signal.json")
 LEARNED = "learned"
+#: control-reward parameters ``--reward`` may change (docs/model.md §2)
+REWARD_KEYS = ("weight_speed", "weight_accel", "weight_jerk", "collision_penalty")
 
 
 def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
@@ -68,6 +74,19 @@ def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
     if bad or not names:
         raise SystemExit(f"{flag} {text!r}: each name must be one of {', '.join(allowed)}")
     return names
+
+
+def _reward_overrides(items: list[str]) -> dict[str, float]:
+    overrides = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or key not in REWARD_KEYS:
+            raise SystemExit(f"--reward {item!r}: expected KEY=VALUE, KEY one of {REWARD_KEYS}")
+        try:
+            overrides[key] = float(value)
+        except ValueError:
+            raise SystemExit(f"--reward {item!r}: {value!r} is not a number") from None
+    return overrides
 
 
 def _ci(samples: torch.Tensor) -> dict[str, float | int]:
@@ -100,17 +119,23 @@ def load_run(path: Path, scratch: Path) -> JointOptimisation:
 
 
 def measure(
-    loop: JointOptimisation, rra_names: list[str], estimators: list[str], episodes: int
+    loop: JointOptimisation,
+    rra_names: list[str],
+    estimators: list[str],
+    episodes: int,
+    params: TwinParams | None = None,
 ) -> list[dict]:
-    """One row per RRA policy × estimator for the loaded run (see the module doc)."""
+    """One row per RRA policy × estimator for the loaded run (see the module doc); ``params``
+    replaces the run's model parameters (e.g. other reward weights)."""
     cfg = loop.cfg
+    params = params or loop.params
     common = dict(
         episodes=episodes, intervals=cfg.experiment.eval_intervals,
         seed=EVAL_SEED_OFFSET + cfg.seed, gamma=loop.gamma, device=loop.device,
         trace_source=loop.eval_traces,
     )  # fmt: skip
     optimal = evaluate_system(
-        loop.params, ActorPolicy(loop.pi_star.actor, "vehicle"), None, perfect=True, **common
+        params, ActorPolicy(loop.pi_star.actor, "vehicle"), None, perfect=True, **common
     )
     rows = []
     for rra_name in rra_names:
@@ -122,10 +147,10 @@ def measure(
             rra_policy = (
                 loop.rra_policy()
                 if rra_name == LEARNED
-                else make_rra_baseline(rra_name, loop.params, cfg.seed)
+                else make_rra_baseline(rra_name, params, cfg.seed)
             )
             acting = evaluate_system(
-                loop.params,
+                params,
                 loop.control_policy(),
                 rra_policy,
                 perfect=False,
@@ -269,11 +294,19 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--episodes", type=int, default=64, help="held-out scenarios per evaluation (>= 2)"
     )
+    parser.add_argument(
+        "--reward",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"evaluate with another control-reward weight ({', '.join(REWARD_KEYS)})",
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     rra_names = _choices("--rra", args.rra, (LEARNED, *RRA_BASELINES))
     estimators = _choices("--estimators", args.estimators, IVOI_ESTIMATORS)
+    reward = _reward_overrides(args.reward)
     if args.episodes < 2:
         raise SystemExit(f"--episodes {args.episodes} must be >= 2 (confidence intervals)")
     if args.threads:
@@ -290,6 +323,10 @@ def main(argv: list[str] | None = None) -> int:
         except CheckpointError as err:
             raise SystemExit(str(err)) from err
         console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
+        try:
+            params = TwinParams.from_overrides(**loop.cfg.scenario.model_kwargs(), **reward)
+        except ConfigError as err:
+            raise SystemExit(f"--reward: {err}") from err
         runs.append(
             {
                 "checkpoint": str(path),
@@ -298,10 +335,12 @@ def main(argv: list[str] | None = None) -> int:
                 "rra_reward": loop.cfg.rra.name,
                 "kappa1": loop.cfg.rra.kappa1,
                 "ivoi_scale": loop.cfg.rra.ivoi_scale,
-                "rows": measure(loop, rra_names, estimators, args.episodes),
+                "rows": measure(loop, rra_names, estimators, args.episodes, params),
             }
         )
     scratch.cleanup()
+    if reward:
+        console.print(f"evaluated with control-reward overrides {reward}")
     print_table(runs, console)
     summary = summarise(runs)
     print_summary(summary, console)
@@ -315,6 +354,7 @@ def main(argv: list[str] | None = None) -> int:
             "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
             "python": sys.version.split()[0],
             "episodes": args.episodes,
+            "reward_overrides": reward,
             "seconds": time.perf_counter() - began,
             "summary": summary,
             "runs": runs,

@@ -76,10 +76,29 @@ def test_measures_every_rra_policy_and_estimator(checkpoint, tmp_path):
     assert not list(checkpoint.parent.parent.glob("ivoi_signal*"))
 
 
+def test_reward_overrides_change_what_is_measured(checkpoint, tmp_path):
+    script = _script()
+    base = ["--episodes", "3", "--rra", "random", "--estimators", "rollout"]
+    figures = {}
+    for name, extra in (("default", []), ("no_jerk", ["--reward", "weight_jerk=0"])):
+        out = tmp_path / f"{name}.json"
+        assert script.main([str(checkpoint), *base, *extra, "--output", str(out)]) == 0
+        data = json.loads(out.read_text())
+        figures[name] = data["runs"][0]["rows"][0]
+        assert data["reward_overrides"] == ({"weight_jerk": 0.0} if extra else {})
+    # the same trajectories (same CAM outcomes), scored without the jerk term
+    assert figures["default"]["cam_delivery_rate"] == figures["no_jerk"]["cam_delivery_rate"]
+    assert figures["default"]["evoi"]["mean"] != figures["no_jerk"]["evoi"]["mean"]
+
+
 def test_bad_arguments_name_the_value(checkpoint, tmp_path):
     script = _script()
     with pytest.raises(SystemExit, match="--rra 'greedy,bogus'"):
         script.main([str(checkpoint), "--rra", "greedy,bogus"])
+    with pytest.raises(SystemExit, match="'weight_foo=1': expected KEY=VALUE"):
+        script.main([str(checkpoint), "--reward", "weight_foo=1"])
+    with pytest.raises(SystemExit, match="collision_penalty=5.0 is outside"):
+        script.main([str(checkpoint), "--reward", "collision_penalty=5"])
     with pytest.raises(SystemExit, match="--episodes 1 must be >= 2"):
         script.main([str(checkpoint), "--episodes", "1"])
     payload = torch.load(checkpoint, weights_only=True)
