@@ -21,9 +21,6 @@ Writes ``benchmarks/results/ivoi_noise.json`` atomically. Example (the committed
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import platform
-import sys
 import tempfile
 import time
 from dataclasses import replace
@@ -34,10 +31,10 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from vdtn_marl import __version__
 from vdtn_marl.algos.jocc import JointOptimisation
+from vdtn_marl.benchmarking import parse_numbers, parse_seeds, provenance
 from vdtn_marl.config import ExperimentConfig, RRAConfig, RunConfig, validate
-from vdtn_marl.runs import atomic_write_json, script_command
+from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
 RESULTS = Path("benchmarks/results/ivoi_noise.json")
@@ -87,16 +84,6 @@ def train_with_synthetic_ivoi(cfg: RunConfig, effect: float, noise: float) -> di
     return {**summary, "synthetic_ivoi_calls": synthetic.calls}
 
 
-def _floats(flag: str, text: str) -> list[float]:
-    try:
-        values = [float(x) for x in text.split(",") if x.strip()]
-    except ValueError:
-        raise SystemExit(f"{flag} {text!r} must be comma-separated numbers") from None
-    if not values or any(v < 0 for v in values):
-        raise SystemExit(f"{flag} {text!r} must list numbers >= 0")
-    return values
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", default="0,1", help="run seeds (one run per seed × noise)")
@@ -104,13 +91,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--effect", type=float, default=0.035, help="ξ of a delivered CAM")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
-    try:
-        seeds = [int(x) for x in args.seeds.split(",") if x.strip()]
-    except ValueError:
-        raise SystemExit(f"--seeds {args.seeds!r} must be comma-separated integers") from None
-    if not seeds:
-        raise SystemExit("--seeds lists no seed")
-    noises = _floats("--noise", args.noise)
+    seeds = parse_seeds("--seeds", args.seeds)
+    noises = parse_numbers("--noise", args.noise)
     torch.set_num_threads(1)
     console = Console()
     began = time.perf_counter()
@@ -148,12 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_json(
         args.output,
         {
-            "benchmark": "ivoi_noise",
-            "command": script_command(),
-            "vdtn_marl": __version__,
-            "written": dt.date.today().isoformat(),
-            "machine": f"{platform.machine()}, 1 torch thread",
-            "python": sys.version.split()[0],
+            **provenance("ivoi_noise"),
             "effect": args.effect,
             "budget": "reduced: 8 PPO iterations for π* and π̃, 16 for the RRA agents",
             "seconds": time.perf_counter() - began,

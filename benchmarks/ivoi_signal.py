@@ -39,10 +39,7 @@ from. Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the co
 from __future__ import annotations
 
 import argparse
-import datetime as dt
-import platform
 import statistics
-import sys
 import tempfile
 import time
 from pathlib import Path
@@ -51,14 +48,14 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from vdtn_marl import __version__
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
+from vdtn_marl.benchmarking import parse_names, provenance
 from vdtn_marl.config import IVOI_ESTIMATORS, from_dict
-from vdtn_marl.runs import atomic_write_json, script_command
+from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi, mean_ci
 
@@ -66,14 +63,6 @@ RESULTS = Path("benchmarks/results/ivoi_signal.json")
 LEARNED = "learned"
 #: control-reward parameters ``--reward`` may change (docs/model.md §2)
 REWARD_KEYS = ("weight_speed", "weight_accel", "weight_jerk", "collision_penalty")
-
-
-def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
-    names = [name.strip() for name in text.split(",") if name.strip()]
-    bad = [name for name in names if name not in allowed]
-    if bad or not names:
-        raise SystemExit(f"{flag} {text!r}: each name must be one of {', '.join(allowed)}")
-    return names
 
 
 def _reward_overrides(items: list[str]) -> dict[str, float]:
@@ -304,8 +293,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
-    rra_names = _choices("--rra", args.rra, (LEARNED, *RRA_BASELINES))
-    estimators = _choices("--estimators", args.estimators, IVOI_ESTIMATORS)
+    rra_names = parse_names("--rra", args.rra, (LEARNED, *RRA_BASELINES))
+    estimators = parse_names("--estimators", args.estimators, IVOI_ESTIMATORS)
     reward = _reward_overrides(args.reward)
     if args.episodes < 2:
         raise SystemExit(f"--episodes {args.episodes} must be >= 2 (confidence intervals)")
@@ -347,12 +336,7 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_json(
         args.output,
         {
-            "benchmark": "ivoi_signal",
-            "command": script_command(),
-            "vdtn_marl": __version__,
-            "written": dt.date.today().isoformat(),
-            "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
-            "python": sys.version.split()[0],
+            **provenance("ivoi_signal"),
             "episodes": args.episodes,
             "reward_overrides": reward,
             "seconds": time.perf_counter() - began,

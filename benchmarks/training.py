@@ -44,6 +44,7 @@ from vdtn_marl.algos.baselines import (
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
+from vdtn_marl.benchmarking import parse_names, parse_seeds
 from vdtn_marl.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.data import trace_source_names
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
@@ -117,26 +118,6 @@ def _costs(result) -> dict[str, float]:
 
 
 WARM_STARTS = ("none", "causal_mpc")
-
-
-def _choices(flag: str, text: str, allowed: tuple[str, ...]) -> list[str]:
-    """Parse a comma-separated list of names out of ``allowed`` (empty: none)."""
-    names = [part.strip() for part in text.split(",") if part.strip()]
-    bad = [name for name in names if name not in allowed]
-    if bad:
-        raise SystemExit(f"{flag} {text!r} must list some of {', '.join(allowed)} (or be '')")
-    return names
-
-
-def _seeds(text: str) -> list[int]:
-    """Parse ``--pi-seeds`` ("0,1,2")."""
-    try:
-        seeds = [int(part) for part in text.split(",") if part.strip()]
-    except ValueError:
-        raise SystemExit(f"--pi-seeds {text!r} must be comma-separated integers") from None
-    if not seeds or len(set(seeds)) != len(seeds):
-        raise SystemExit(f"--pi-seeds {text!r} must name at least one seed, each once")
-    return seeds
 
 
 def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: TwinParams):
@@ -261,11 +242,11 @@ def main(argv: list[str] | None = None) -> int:
     exact_horizon = {"horizon_intervals": args.intervals}
     costs: dict[str, dict] = {}
     training = []
-    variants = _choices("--warm-starts", args.warm_starts, WARM_STARTS)
+    variants = parse_names("--warm-starts", args.warm_starts, WARM_STARTS, allow_empty=True)
     per_seed: dict[str, list[float]] = {}
     for warm_start in variants:
         name = f"pi_star_{warm_start}"
-        for seed in _seeds(args.pi_seeds):
+        for seed in parse_seeds("--pi-seeds", args.pi_seeds):
             actor, trained = train_pi_star(args, seed, warm_start, params)
             training.append(trained)
             result = evaluate_system(params, ActorPolicy(actor, "vehicle"), None, **common)

@@ -150,6 +150,7 @@ def evaluate_system(
     v2i_sum = torch.zeros((), dtype=torch.float64, device=dev)
     cams_sent = torch.zeros((), dtype=torch.float64, device=dev)
     cams_delivered = torch.zeros((), dtype=torch.float64, device=dev)
+    by_delivery = radio and ivoi_estimator is not None  # ξ split by CAM delivery
     xi_delivered = _MaskedMean(b, dev)
     xi_lost = _MaskedMean(b, dev)
     latencies = []
@@ -171,13 +172,10 @@ def evaluate_system(
         live = alive[:, None].double()
         reward = record.reward.double()
         returns += weight * live * reward
+        xi = None
         if ivoi_estimator is not None:
             xi = ivoi_estimator(twin, record).double()
             ivoi_sums += weight * live * xi
-            if radio:  # link i carries follower i's CAM
-                lost = record.cam_delay_subframes > t
-                xi_delivered.add(xi, alive[:, None] & ~lost)
-                xi_lost.add(xi, alive[:, None] & lost)
         reward_sum += (live * reward).sum()
         gap_sum += (live * record.gap_error_m.abs().double()).sum()
         speed_sum += (live * record.speed_error_mps.abs().double()).sum()
@@ -185,10 +183,14 @@ def evaluate_system(
         if radio:
             v2i_sum += (alive[:, None].double() * record.v2i_rate_bps.double()).mean(-1).sum()
             delay = record.cam_delay_subframes
-            delivered = (delay <= t) & alive[:, None]
+            in_time = delay <= t  # [B, L]; link i carries follower i's CAM
+            delivered = in_time & alive[:, None]
             cams_sent += alive.double().sum() * delay.shape[-1]
             cams_delivered += delivered.double().sum()
             latencies.append(delay[delivered].double() * subframe_ms)
+            if xi is not None:
+                xi_delivered.add(xi, delivered)
+                xi_lost.add(xi, ~in_time & alive[:, None])
         if record_traces:
             gap_trace.append(record.gap_error_m[0].abs().cpu())
             speed_trace.append(record.speed_error_mps[0].abs().cpu())
@@ -217,10 +219,9 @@ def evaluate_system(
                 cam_latency_ms_p95=float("nan"),
             )
         metrics["v2i_throughput_mbps_per_link"] = float(v2i_sum / live_intervals / 1e6)
-        if ivoi_estimator is not None:
+        if by_delivery:
             metrics["ivoi_mean_delivered"] = xi_delivered.pooled()
             metrics["ivoi_mean_lost"] = xi_lost.pooled()
-    by_delivery = radio and ivoi_estimator is not None
     traces = {}
     if record_traces:
         traces = {

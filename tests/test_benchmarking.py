@@ -1,0 +1,37 @@
+"""Option parsing and provenance shared by the benchmark scripts."""
+
+import pytest
+
+from vdtn_marl.benchmarking import parse_names, parse_numbers, parse_seeds, provenance
+
+
+def test_parse_names():
+    assert parse_names("--x", " a, b ", ("a", "b", "c")) == ["a", "b"]
+    assert parse_names("--x", "", ("a",), allow_empty=True) == []
+    with pytest.raises(SystemExit, match=r"--x 'a,z' must list some of a, b$"):
+        parse_names("--x", "a,z", ("a", "b"))
+    with pytest.raises(SystemExit, match=r"--x '' must list some of a"):
+        parse_names("--x", "", ("a",))
+
+
+def test_parse_seeds_and_numbers():
+    assert parse_seeds("--seeds", "0, 2") == [0, 2]
+    for bad, message in (
+        ("0,x", "comma-separated integers"),
+        ("1,1", "each once"),
+        ("", "at least one"),
+    ):
+        with pytest.raises(SystemExit, match=f"--seeds '{bad}' must .*{message}"):
+            parse_seeds("--seeds", bad)
+    assert parse_numbers("--noise", "0,0.1") == [0.0, 0.1]
+    with pytest.raises(SystemExit, match=r"--noise '0,-0.1' must list numbers >= 0"):
+        parse_numbers("--noise", "0,-0.1")
+    with pytest.raises(SystemExit, match="comma-separated numbers"):
+        parse_numbers("--noise", "a")
+
+
+def test_provenance_names_the_command_without_the_interpreter_path():
+    block = provenance("demo")
+    assert block["benchmark"] == "demo"
+    assert block["command"].startswith("python ")
+    assert {"vdtn_marl", "torch", "written", "machine", "python"} <= block.keys()

@@ -1,0 +1,64 @@
+"""Helpers shared by the scripts in ``benchmarks/``: comma-separated option lists that fail
+with a message naming the flag and the value, and the provenance block of a results JSON."""
+
+from __future__ import annotations
+
+import datetime as dt
+import platform
+import sys
+
+import torch
+
+from vdtn_marl import __version__
+from vdtn_marl.runs import script_command
+
+
+def _parts(text: str) -> list[str]:
+    return [part.strip() for part in text.split(",") if part.strip()]
+
+
+def parse_names(
+    flag: str, text: str, allowed: tuple[str, ...], allow_empty: bool = False
+) -> list[str]:
+    """Names out of ``allowed`` from ``"a,b"``; ``''`` gives ``[]`` only with ``allow_empty``."""
+    names = _parts(text)
+    if any(name not in allowed for name in names) or not (names or allow_empty):
+        empty = " (or be '')" if allow_empty else ""
+        raise SystemExit(f"{flag} {text!r} must list some of {', '.join(allowed)}{empty}")
+    return names
+
+
+def parse_seeds(flag: str, text: str) -> list[int]:
+    """Distinct integer seeds from ``"0,1,2"`` (at least one)."""
+    try:
+        seeds = [int(part) for part in _parts(text)]
+    except ValueError:
+        raise SystemExit(f"{flag} {text!r} must be comma-separated integers") from None
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise SystemExit(f"{flag} {text!r} must name at least one seed, each once")
+    return seeds
+
+
+def parse_numbers(flag: str, text: str, minimum: float = 0.0) -> list[float]:
+    """Numbers ≥ ``minimum`` from ``"0,0.1"`` (at least one)."""
+    try:
+        values = [float(part) for part in _parts(text)]
+    except ValueError:
+        raise SystemExit(f"{flag} {text!r} must be comma-separated numbers") from None
+    if not values or any(value < minimum for value in values):
+        raise SystemExit(f"{flag} {text!r} must list numbers >= {minimum:g}")
+    return values
+
+
+def provenance(benchmark: str) -> dict[str, str]:
+    """Who wrote a results JSON: benchmark name, the command as typed, versions, date, machine
+    and the torch threads in use."""
+    return {
+        "benchmark": benchmark,
+        "command": script_command(),
+        "vdtn_marl": __version__,
+        "torch": torch.__version__,
+        "written": dt.date.today().isoformat(),
+        "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
+        "python": sys.version.split()[0],
+    }
