@@ -1,11 +1,12 @@
 """IVoI noise tolerance: can the RRA learner pick up a VoI reward of ξ's size and noise?
 
-A positive control for JOCC's RRA stage. The RRA agents are trained exactly as in JOCC with
-κ1 = 0 (the VoI term only), but ξ is replaced by a synthetic IVoI whose value is known:
+A positive control for JOCC's RRA stage. The RRA agents are trained exactly as in JOCC, by
+default with κ1 = 0 (the VoI term only; ``--kappa1`` adds the V2I throughput term back), but
+ξ is replaced by a synthetic IVoI whose value is known:
 
     ξ_i = effect · 1[follower i's CAM was delivered within its interval] + noise · N(0, 1),
 
-so the only thing that pays is CAM delivery. ``--effect`` defaults to what
+so with κ1 = 0 the only thing that pays is CAM delivery. ``--effect`` defaults to what
 ``benchmarks/ivoi_signal.py`` measured for the ``td`` estimator under random RRA (0.035 per
 interval, unscaled), ``--noise`` to multiples of ξ's per-interval standard deviation there
 (≈ 0.1). With no noise the learner should deliver far more CAMs than random RRA (≈ 16 %); the
@@ -60,22 +61,26 @@ class SyntheticIVoI:
         return self.effect * delivered + self.noise * noise
 
 
-def reduced_config(seed: int) -> RunConfig:
-    """JOCC with κ1 = 0 at the ``reduced`` leaderboard budgets (platoon4 defaults)."""
+def reduced_config(seed: int, kappa1: float = 0.0) -> RunConfig:
+    """JOCC with ``kappa1`` (κ2 = 1 − κ1) at the ``reduced`` leaderboard budgets (platoon4
+    defaults)."""
     experiment = replace(
         ExperimentConfig(), control_iterations=8, rra_iterations=16, checkpoint_every=0
     )
     return RunConfig(
-        rra=RRAConfig(name="jocc", kappa1=0.0), experiment=experiment, seed=seed, progress=False
+        rra=RRAConfig(name="jocc", kappa1=kappa1),
+        experiment=experiment,
+        seed=seed,
+        progress=False,
     )
 
 
 def train_with_synthetic_ivoi(cfg: RunConfig, effect: float, noise: float) -> dict:
-    """Run one JOCC iteration of ``cfg`` (κ1 = 0) with ξ replaced by :class:`SyntheticIVoI`;
-    returns the run's summary and how often the synthetic IVoI was called."""
+    """Run one JOCC iteration of ``cfg`` with ξ replaced by :class:`SyntheticIVoI`; returns
+    the run's summary and how often the synthetic IVoI was called."""
     cfg = validate(cfg)
-    if cfg.rra.name != "jocc" or cfg.rra.kappa1 != 0.0:
-        raise ValueError("the synthetic IVoI is the whole RRA reward only with rra=jocc, κ1 = 0")
+    if cfg.rra.name != "jocc" or cfg.rra.kappa2_value == 0.0:
+        raise ValueError("the synthetic IVoI enters the RRA reward only with rra=jocc, κ2 > 0")
     with tempfile.TemporaryDirectory(prefix="ivoi_noise_") as run_dir:
         loop = JointOptimisation(cfg, run_dir)
         synthetic = SyntheticIVoI(effect, noise, seed=cfg.seed)
@@ -89,10 +94,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seeds", default="0,1", help="run seeds (one run per seed × noise)")
     parser.add_argument("--noise", default="0,0.03,0.1,0.3", help="std devs of ξ's noise")
     parser.add_argument("--effect", type=float, default=0.035, help="ξ of a delivered CAM")
+    parser.add_argument(
+        "--kappa1", type=float, default=0.0, help="weight of V2I throughput, in [0, 1)"
+    )
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     seeds = parse_seeds("--seeds", args.seeds)
     noises = parse_numbers("--noise", args.noise)
+    if not 0.0 <= args.kappa1 < 1.0:
+        raise SystemExit(f"--kappa1 {args.kappa1!r} must be in [0, 1) (κ2 = 1 − κ1 > 0)")
     torch.set_num_threads(1)
     console = Console()
     began = time.perf_counter()
@@ -100,7 +110,9 @@ def main(argv: list[str] | None = None) -> int:
     for noise in noises:
         for seed in seeds:
             start = time.perf_counter()
-            summary = train_with_synthetic_ivoi(reduced_config(seed), args.effect, noise)
+            summary = train_with_synthetic_ivoi(
+                reduced_config(seed, args.kappa1), args.effect, noise
+            )
             rows.append(
                 {
                     "noise": noise,
@@ -114,7 +126,7 @@ def main(argv: list[str] | None = None) -> int:
             console.print(
                 f"noise {noise:g}, seed {seed}: CAM delivery {summary['cam_delivery_rate']:.3f}"
             )
-    title = f"RRA trained on ξ = {args.effect:g}·1[delivered] + noise·N(0,1), κ1 = 0"
+    title = f"RRA trained on ξ = {args.effect:g}·1[delivered] + noise·N(0,1), κ1 = {args.kappa1:g}"
     table = Table(title=escape(title))
     for column in ("noise", "seed", "CAM delivery", "V2I per link (Mbps)", "control cost"):
         table.add_column(column, justify="right")
@@ -132,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
         {
             **provenance("ivoi_noise"),
             "effect": args.effect,
+            "kappa1": args.kappa1,
             "budget": "reduced: 8 PPO iterations for π* and π̃, 16 for the RRA agents",
             "seconds": time.perf_counter() - began,
             "rows": rows,

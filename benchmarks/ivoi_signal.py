@@ -9,8 +9,12 @@ For every checkpoint (a run's ``checkpoints/last.pt``; its config comes from the
 it loads π*, π̃ (or the run's control baseline) and, if the run learned one, the RRA policy,
 then evaluates the acting system on the run's held-out scenarios (the evaluation seed of the
 run) under each RRA policy of ``--rra`` (``learned`` is the run's own RRA policy) with each
-IVoI estimator of ``--estimators`` (``td``: π*'s critic; ``rollout``: π* for 10 intervals,
-then the critic). Reported per checkpoint × RRA policy × estimator:
+IVoI estimator of ``--estimators``: ``td`` (π*'s critic), ``rollout`` (as the run configured
+it: ``rra.rollout_intervals`` intervals of π*, 10 by default, then with
+``rra.rollout_bootstrap`` the critic), ``rollout:H`` (H intervals, then the critic; ``rollout:1``
+is the actual command's TD error minus π*'s own, both over the same trace) or ``rollout:H:mc``
+(H intervals and no critic: for large H the critic-free reference). Reported per checkpoint ×
+RRA policy × estimator:
 
 - CAM delivery rate, collision rate (fraction of scenarios), control cost;
 - EVoI = J̃ − J* (discounted control return per follower, paired by scenario) and the IVoI
@@ -19,14 +23,17 @@ then the critic). Reported per checkpoint × RRA policy × estimator:
   them is the estimator's bias (a critic trained for a few iterations, a truncated rollout);
 - mean ξ over the follower-intervals whose CAM was delivered within its interval and over
   those whose CAM was not, and the difference delivered − lost, paired by scenario (the
-  scenarios with both), each with its 95% CI over scenarios. ξ is unscaled (reward units of
-  the control reward; the RRA reward multiplies it by κ2·s_ξ).
+  scenarios with both), each with its 95% CI over scenarios, and the standard deviation of ξ
+  over all follower-intervals (the noise the RRA agents learn against). ξ is unscaled
+  (reward units of the control reward; the RRA reward multiplies it by κ2·s_ξ).
 
 Only under ``random`` RRA is a CAM's delivery independent of the platoon's state, so only
 there is delivered − lost the effect of delivery on ξ. Under a learned policy it also
 reflects where the policy delivers (one that delivers when the platoon is in trouble shows a
 lower ξ on delivered CAMs even if delivery helps).
 
+``--clip C`` clips every ξ to [−C, C]; with C well below the collision penalty (100) it shows
+how much of a difference and of ξ's spread comes from the intervals that end in a collision.
 ``--reward weight_jerk=0`` (repeatable; ``weight_speed``, ``weight_accel``, ``weight_jerk``,
 ``collision_penalty``) evaluates the same policies with other control-reward weights, so that
 returns, EVoI and ξ leave that term out: it shows which term of the reward a difference comes
@@ -39,6 +46,7 @@ from. Writes ``benchmarks/results/ivoi_signal.json`` atomically. Example (the co
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import tempfile
 import time
@@ -87,6 +95,49 @@ def _ci(samples: torch.Tensor) -> dict[str, float | int]:
     return {"mean": mean, "low": low, "high": high, "n": int(finite.numel())}
 
 
+def parse_estimators(text: str) -> list[str]:
+    """Estimator specs (see the module doc) from ``"td,rollout:100:mc"``."""
+    specs = [part.strip() for part in text.split(",") if part.strip()]
+    usage = (
+        f"--estimators {text!r} must list some of {', '.join(IVOI_ESTIMATORS)}, "
+        "rollout:H or rollout:H:mc (H an integer >= 1)"
+    )
+    if not specs:
+        raise SystemExit(usage)
+    for spec in specs:
+        name, *rest = spec.split(":")
+        if name not in IVOI_ESTIMATORS or (rest and name != "rollout") or len(rest) > 2:
+            raise SystemExit(usage)
+        if rest and (not rest[0].isdigit() or int(rest[0]) < 1 or rest[1:] not in ([], ["mc"])):
+            raise SystemExit(usage)
+    return specs
+
+
+def make_estimator(loop: JointOptimisation, spec: str, clip: float | None = None):
+    """The IVoI estimator of a spec accepted by :func:`parse_estimators`; with ``clip`` its ξ
+    is clipped to [−clip, clip]."""
+    name, *rest = spec.split(":")
+    if not rest:
+        estimator = loop.ivoi_estimator(name)
+    else:
+        bootstrap = rest[1:] != ["mc"]
+        estimator = loop.ivoi_estimator(name, rollout_intervals=int(rest[0]), bootstrap=bootstrap)
+    return estimator if clip is None else ClippedIVoI(estimator, clip)
+
+
+class ClippedIVoI:
+    """ξ of ``estimator`` clipped to [−clip, clip] (``--clip``): with a clip well below the
+    collision penalty the intervals that end in a collision no longer dominate ξ's mean and
+    spread."""
+
+    def __init__(self, estimator, clip: float):
+        self.estimator = estimator
+        self.clip = clip
+
+    def __call__(self, twin, record) -> torch.Tensor:
+        return self.estimator(twin, record).clamp(-self.clip, self.clip)
+
+
 def load_run(path: Path, scratch: Path) -> JointOptimisation:
     """The JOCC loop of a checkpoint, with every trainer's weights loaded; its run directory
     is ``scratch`` (nothing is written next to the checkpoint)."""
@@ -113,9 +164,10 @@ def measure(
     estimators: list[str],
     episodes: int,
     params: TwinParams | None = None,
+    clip: float | None = None,
 ) -> list[dict]:
     """One row per RRA policy × estimator for the loaded run (see the module doc); ``params``
-    replaces the run's model parameters (e.g. other reward weights)."""
+    replaces the run's model parameters (e.g. other reward weights), ``clip`` clips ξ."""
     cfg = loop.cfg
     params = params or loop.params
     common = dict(
@@ -143,7 +195,7 @@ def measure(
                 loop.control_policy(),
                 rra_policy,
                 perfect=False,
-                ivoi_estimator=loop.ivoi_estimator(estimator),
+                ivoi_estimator=make_estimator(loop, estimator, clip),
                 completion=loop.completion,
                 **common,
             )
@@ -161,6 +213,7 @@ def measure(
                     "ivoi_delivered": _ci(acting.ivoi_delivered),
                     "ivoi_lost": _ci(acting.ivoi_lost),
                     "ivoi_delivered_minus_lost": _ci(acting.ivoi_delivered - acting.ivoi_lost),
+                    "ivoi_std": m["ivoi_std"],
                     "seconds": time.perf_counter() - began,
                 }
             )
@@ -179,7 +232,7 @@ def print_table(runs: list[dict], console: Console) -> None:
     table = Table(title="IVoI signal (ξ unscaled; 95% CIs over scenarios)")
     for column in (
         "run", "RRA", "estimator", "CAM delivery", "collisions", "EVoI", "Σγᵏξ",
-        "ξ | delivered", "ξ | lost", "delivered − lost",
+        "ξ | delivered", "ξ | lost", "delivered − lost", "sd(ξ)",
     ):  # fmt: skip
         table.add_column(column, justify="left" if column in ("run", "RRA") else "right")
     for run in runs:
@@ -195,6 +248,7 @@ def print_table(runs: list[dict], console: Console) -> None:
                 _fmt(row["ivoi_delivered"]),
                 _fmt(row["ivoi_lost"]),
                 _fmt(row["ivoi_delivered_minus_lost"]),
+                f"{row['ivoi_std']:.3g}",
             )
     console.print(table)
 
@@ -219,7 +273,7 @@ def summarise(runs: list[dict]) -> list[dict]:
                 "estimator": estimator,
                 "runs": len(rows),
                 **{
-                    key: statistics.fmean(_value(r[key]) for r in rows)
+                    key: _finite_mean(_value(r[key]) for r in rows)
                     for key in (
                         "cam_delivery_rate",
                         "collision_rate",
@@ -227,6 +281,7 @@ def summarise(runs: list[dict]) -> list[dict]:
                         "ivoi_sum",
                         "ivoi_delivered",
                         "ivoi_lost",
+                        "ivoi_std",
                     )  # fmt: skip
                 },
                 "ivoi_delivered_minus_lost": (
@@ -239,6 +294,12 @@ def summarise(runs: list[dict]) -> list[dict]:
     return summary
 
 
+def _finite_mean(values) -> float:
+    """Mean of the finite values (NaN if none: e.g. ξ | lost where no run lost a CAM)."""
+    finite = [v for v in values if math.isfinite(v)]
+    return statistics.fmean(finite) if finite else float("nan")
+
+
 def _value(figure) -> float:
     return figure["mean"] if isinstance(figure, dict) else figure
 
@@ -248,7 +309,7 @@ def print_summary(summary: list[dict], console: Console) -> None:
     table = Table(title=title)
     for column in (
         "runs of", "RRA", "estimator", "runs", "CAM delivery", "collisions", "EVoI", "Σγᵏξ",
-        "ξ | delivered", "ξ | lost", "delivered − lost", "above / below 0",
+        "ξ | delivered", "ξ | lost", "delivered − lost", "above / below 0", "sd(ξ)",
     ):  # fmt: skip
         table.add_column(column, justify="left" if column in ("runs of", "RRA") else "right")
     for row in summary:
@@ -265,6 +326,7 @@ def print_summary(summary: list[dict], console: Console) -> None:
             f"{row['ivoi_lost']:+.3g}",
             f"{row['ivoi_delivered_minus_lost']:+.3g}",
             f"{row['runs_delivered_above_lost']} / {row['runs_delivered_below_lost']}",
+            f"{row['ivoi_std']:.3g}",
         )
     console.print(table)
 
@@ -278,7 +340,9 @@ def main(argv: list[str] | None = None) -> int:
         help=f"RRA policies, from {LEARNED}, {', '.join(RRA_BASELINES)}",
     )
     parser.add_argument(
-        "--estimators", default="td,rollout", help=f"IVoI estimators: {', '.join(IVOI_ESTIMATORS)}"
+        "--estimators",
+        default="td,rollout",
+        help=f"IVoI estimators: {', '.join(IVOI_ESTIMATORS)}, rollout:H, rollout:H:mc",
     )
     parser.add_argument(
         "--episodes", type=int, default=64, help="held-out scenarios per evaluation (>= 2)"
@@ -290,19 +354,24 @@ def main(argv: list[str] | None = None) -> int:
         metavar="KEY=VALUE",
         help=f"evaluate with another control-reward weight ({', '.join(REWARD_KEYS)})",
     )
+    parser.add_argument(
+        "--clip", type=float, default=None, help="clip ξ to [-CLIP, CLIP] (CLIP > 0)"
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     rra_names = parse_names("--rra", args.rra, (LEARNED, *RRA_BASELINES))
-    estimators = parse_names("--estimators", args.estimators, IVOI_ESTIMATORS)
+    estimators = parse_estimators(args.estimators)
     reward = _reward_overrides(args.reward)
+    if args.clip is not None and not args.clip > 0:
+        raise SystemExit(f"--clip {args.clip!r} must be > 0")
     if args.episodes < 2:
         raise SystemExit(f"--episodes {args.episodes} must be >= 2 (confidence intervals)")
     if args.threads:
         torch.set_num_threads(args.threads)
-    console = Console()
+    console = Console(emoji=False)  # estimator specs such as rollout:100:mc stay as typed
     if not console.is_terminal:  # a log file: wide enough for the table
-        console = Console(width=240)
+        console = Console(width=240, emoji=False)
     began = time.perf_counter()
     runs = []
     scratch = tempfile.TemporaryDirectory(prefix="ivoi_signal_")
@@ -324,12 +393,14 @@ def main(argv: list[str] | None = None) -> int:
                 "rra_reward": loop.cfg.rra.name,
                 "kappa1": loop.cfg.rra.kappa1,
                 "ivoi_scale": loop.cfg.rra.ivoi_scale,
-                "rows": measure(loop, rra_names, estimators, args.episodes, params),
+                "rows": measure(loop, rra_names, estimators, args.episodes, params, args.clip),
             }
         )
     scratch.cleanup()
     if reward:
         console.print(f"evaluated with control-reward overrides {reward}")
+    if args.clip is not None:
+        console.print(f"ξ clipped to [−{args.clip:g}, {args.clip:g}]")
     print_table(runs, console)
     summary = summarise(runs)
     print_summary(summary, console)
@@ -339,6 +410,7 @@ def main(argv: list[str] | None = None) -> int:
             **provenance("ivoi_signal"),
             "episodes": args.episodes,
             "reward_overrides": reward,
+            "clip": args.clip,
             "seconds": time.perf_counter() - began,
             "summary": summary,
             "runs": runs,

@@ -219,6 +219,8 @@ BAD_CONFIGS = [
     (["algo.lr_schedule=cosine"], "algo.lr_schedule='cosine'"),
     (["algo.validate_every=-1"], "algo.validate_every=-1"),
     (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
+    (["algo.rra_burn_in_intervals=200"], "algo.rra_burn_in_intervals=200"),
+    (["rra.rollout_intervals=0"], "rra.rollout_intervals=0"),
     (["scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.model.foo=1"], "scenario.model.foo=1"),

@@ -113,6 +113,8 @@ def test_bad_arguments_name_the_value(checkpoint, tmp_path):
         script.main([str(checkpoint), "--reward", "weight_foo=1"])
     with pytest.raises(SystemExit, match="collision_penalty=5.0 is outside"):
         script.main([str(checkpoint), "--reward", "collision_penalty=5"])
+    with pytest.raises(SystemExit, match="--clip 0.0 must be > 0"):
+        script.main([str(checkpoint), "--clip", "0"])
     with pytest.raises(SystemExit, match="--episodes 1 must be >= 2"):
         script.main([str(checkpoint), "--episodes", "1"])
     payload = torch.load(checkpoint, weights_only=True)
@@ -153,5 +155,41 @@ def test_rra_training_reads_the_synthetic_ivoi():
     # the RRA environment asked the synthetic IVoI, not the td estimator, for ξ
     assert summary["synthetic_ivoi_calls"] >= 1
     assert 0.0 <= summary["cam_delivery_rate"] <= 1.0
-    with pytest.raises(ValueError, match="κ1 = 0"):
-        noise_module.train_with_synthetic_ivoi(replace(cfg, rra=RRAConfig(kappa1=0.5)), 0.035, 0.1)
+    with pytest.raises(ValueError, match="κ2 > 0"):
+        noise_module.train_with_synthetic_ivoi(replace(cfg, rra=RRAConfig(kappa1=1.0)), 0.035, 0.1)
+    with pytest.raises(SystemExit, match="--kappa1 1.0 must be in"):
+        noise_module.main(["--kappa1", "1"])
+
+
+def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
+    script = _script()
+    assert script.parse_estimators("td, rollout:1,rollout:12:mc") == [
+        "td", "rollout:1", "rollout:12:mc"
+    ]  # fmt: skip
+    for bad in ("rollout:0", "rollout:x", "td:5", "rollout:5:nope", "paired", ""):
+        with pytest.raises(SystemExit, match="must list some of td, rollout"):
+            script.parse_estimators(bad)
+    loop = script.load_run(checkpoint, tmp_path / "scratch")
+    default = script.make_estimator(loop, "rollout")  # the run's rra.rollout_* (10, bootstrap)
+    assert default.horizon_intervals == 10 and default.terminal_value is not None
+    short = script.make_estimator(loop, "rollout:1")
+    assert short.horizon_intervals == 1 and short.terminal_value is not None
+    mc = script.make_estimator(loop, "rollout:12:mc")
+    assert mc.horizon_intervals == 12 and mc.terminal_value is None
+    rra = replace(loop.cfg.rra, rollout_intervals=4, rollout_bootstrap=False)
+    loop.cfg = replace(loop.cfg, rra=rra)
+    configured = loop.ivoi_estimator("rollout")
+    assert configured.horizon_intervals == 4 and configured.terminal_value is None
+    out = tmp_path / "specs.json"
+    args = ["--episodes", "3", "--rra", "random", "--estimators", "rollout:1,rollout:12:mc"]
+    assert script.main([str(checkpoint), *args, "--output", str(out)]) == 0
+    rows = json.loads(out.read_text())["runs"][0]["rows"]
+    assert [row["estimator"] for row in rows] == ["rollout:1", "rollout:12:mc"]
+    assert rows[0]["ivoi_sum"] != rows[1]["ivoi_sum"]
+    assert all(row["ivoi_std"] > 0 for row in rows)
+    clipped = tmp_path / "clipped.json"
+    assert script.main([str(checkpoint), *args, "--clip", "1e-6", "--output", str(clipped)]) == 0
+    data = json.loads(clipped.read_text())
+    assert data["clip"] == 1e-6
+    for row in data["runs"][0]["rows"]:
+        assert row["ivoi_std"] <= 1e-6 and abs(row["ivoi_sum"]["mean"]) <= 20 * 1e-6

@@ -85,6 +85,9 @@ class AlgoConfig:
     rollout_steps: int = 200  # control intervals per scenario per batch: whole 10 s episodes
     rra_num_envs: int = 64  # B scenarios collected in parallel (RRA agents)
     rra_rollout_steps: int = 100  # subframes per scenario per collected batch (RRA agents)
+    # RRA batches start after K ~ U{0..rra_burn_in_intervals} control intervals of the
+    # acting system under random RRA (0: at the episode's start, where the platoon is at rest)
+    rra_burn_in_intervals: int = 0
     # every N iterations of a stage, score the deterministic policy on fixed validation
     # scenarios and keep the best actor and critic for the stage's end (0: keep the last)
     validate_every: int = 0
@@ -120,6 +123,8 @@ class RRAConfig:
     kappa1: float = 0.5  # weight of V2I throughput
     kappa2: float | None = None  # weight of IVoI; None means 1 − κ1
     ivoi_estimator: str = "td"
+    rollout_intervals: int = 10  # rollout estimator: intervals rolled out with π*
+    rollout_bootstrap: bool = True  # rollout estimator: π*'s critic values the tail
     throughput_scale: float = 0.004  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = 20.0  # multiplies ξ before κ2
     miss_penalty: float = 1.0  # drra: penalty of a CAM that misses its interval
@@ -207,6 +212,9 @@ def validate(cfg: RunConfig) -> RunConfig:
         )
     _choice("rra.name", r.name, RRA_METHODS)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
+    _positive_int("rra.rollout_intervals", r.rollout_intervals, high=100_000)
+    if not isinstance(r.rollout_bootstrap, bool):
+        raise ConfigError(f"rra.rollout_bootstrap={r.rollout_bootstrap!r} must be true or false")
     _choice("task", cfg.task, TASKS)
     _real("rra.kappa1", r.kappa1, 0.0, 1.0)
     if r.kappa2 is not None:
@@ -231,6 +239,10 @@ def validate(cfg: RunConfig) -> RunConfig:
     ):
         _positive_int(f"algo.{key}", getattr(a, key))
     _positive_int("algo.validate_every", a.validate_every, low=0)
+    # at least one interval of the episode is left after the burn-in
+    _positive_int(
+        "algo.rra_burn_in_intervals", a.rra_burn_in_intervals, low=0, high=s.episode_intervals - 1
+    )
     _positive_int("algo.validation_scenarios", a.validation_scenarios)
     _real("algo.lr", a.lr, 0.0, 1.0, low_open=True)
     _real("algo.gamma", a.gamma, 0.0, 1.0)

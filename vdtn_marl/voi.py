@@ -79,17 +79,20 @@ def discounted_rollout(
     (R rows, e.g. branches × scenarios; ``interval`` [R] says where each row is on the twin's
     leader trace, rows r map to scenario r mod B). The first interval may use a given command
     and switch subframe. With ``stop_at_episode_end`` rewards after the episode's last
-    interval count zero (finite-horizon value). Returns (returns, final state).
+    interval count zero (finite-horizon value). A collision (any gap ≤ 0) ends a row's episode
+    as it ends the environment's: the colliding interval's reward and penalty count, later
+    intervals count zero. Returns (returns, final state).
 
     On a NumPy twin with the linear CACC as ``policy`` the rollout runs on NumPy arrays
     (:func:`_cacc_rollout_numpy`, the same numbers); inputs and results are torch tensors
     either way."""
     if not _numpy_path(twin, policy):
-        return _rollout(
+        returns, final, _ = _rollout(
             twin, state, interval, policy, horizon_intervals, discount,
             first_command, first_switch, stop_at_episode_end,
         )  # fmt: skip
-    returns, final = _cacc_rollout_numpy(
+        return returns, final
+    returns, final, _ = _cacc_rollout_numpy(
         twin,
         state.numpy(),
         to_numpy(interval),
@@ -115,7 +118,8 @@ def _rollout(
     stop_at_episode_end: bool = False,
 ):
     """:func:`discounted_rollout` on torch tensors or NumPy arrays (all inputs alike); for the
-    linear CACC on NumPy arrays, :func:`_cacc_rollout_numpy` computes the same faster."""
+    linear CACC on NumPy arrays, :func:`_cacc_rollout_numpy` computes the same faster.
+    Returns (returns [R, F], final state, alive [R]: 1 where no collision ended the row)."""
     pp = twin.params.platoon
     integrator: IntervalIntegrator = twin.integrator
     rows = interval.shape[0]
@@ -124,10 +128,12 @@ def _rollout(
     if isinstance(interval, np.ndarray):
         steps = np.arange(horizon_intervals)
         returns = np.zeros((rows, f), np.float32)
+        alive = np.ones(rows, np.float32)
         zero_switch = np.zeros((rows, f), np.int64)
     else:
         steps = torch.arange(horizon_intervals, device=interval.device)
         returns = torch.zeros(rows, f, device=interval.device)
+        alive = torch.ones(rows, device=interval.device)
         zero_switch = torch.zeros(rows, f, dtype=torch.long, device=interval.device)
     leader = repeat_rows(
         twin.leader_accel_mps2(interval[: twin.batch_size, None] + steps), repeats
@@ -151,14 +157,16 @@ def _rollout(
         reward = control_reward(
             gap_error, speed_error, after.command_mps2[:, 1:], state.command_mps2[:, 1:], pp
         )
-        reward = reward + as_float(gaps_m(after.position_m, pp) <= 0) * pp.collision_penalty
+        collided = gaps_m(after.position_m, pp) <= 0
+        reward = reward + as_float(collided) * pp.collision_penalty
         if stop_at_episode_end:
             inside = as_float(interval + h < twin.params.episode_intervals)[:, None]
             reward = reward * inside
-        returns = returns + weight * reward
+        returns = returns + weight * (reward * alive[:, None])
+        alive = alive * as_float(~collided.any(-1))
         weight *= discount
         state = after
-    return returns, state
+    return returns, state, alive
 
 
 def _cacc_rollout_numpy(
@@ -231,6 +239,7 @@ def _cacc_rollout_numpy(
     u_old = command[:, 1:]
     terms = np.empty((4, rows, f), f32)
     returns = np.zeros((rows, f), f32)
+    alive = np.ones(rows, f32)
     g_all = gain[t]
     weight = 1.0
     for h in range(horizon_intervals):
@@ -272,13 +281,14 @@ def _cacc_rollout_numpy(
             reward = reward + collided.astype(f32) * penalty
         if stop_at_episode_end:
             reward = reward * (interval + h < twin.params.episode_intervals).astype(f32)[:, None]
-        returns = returns + weight * reward
+        returns = returns + weight * (reward * alive[:, None])
+        alive = alive * (~collided.any(-1)).astype(f32)
         weight *= discount
         u_old = u
     command = np.empty((rows, n), f32)
     command[:, 0], command[:, 1:] = leader[:, -1], u
     final = PlatoonState(position.copy(), speed.copy(), packed[..., 2].copy(), command)
-    return returns, final
+    return returns, final, alive
 
 
 class RolloutValue:
@@ -320,7 +330,8 @@ class RolloutIVoIEstimator:
     acting system did (its u_k and switch subframe). ξ_i is the difference of follower i's
     discounted control return between branch i and branch 0. Platoon dynamics are
     deterministic given the trace, so one rollout per branch is exact for that reference and
-    horizon; with ``terminal_value`` (a callable on perfect observations [.., F, 8] → [.., F])
+    horizon. A collision ends a branch's episode (its penalty counts once, as in the
+    environment). With ``terminal_value`` (a callable on perfect observations [.., F, 8] → [.., F])
     the tail beyond the horizon is bootstrapped.
     """
 
@@ -380,12 +391,12 @@ class RolloutIVoIEstimator:
         )
 
         rollout = _cacc_rollout_numpy if lib is np else _rollout
-        returns, state = rollout(
+        returns, state, alive = rollout(
             twin, state, repeat_rows(interval, branches), policy,
             self.horizon_intervals, self.discount, u, switch, False,
         )  # fmt: skip
-        if self.terminal_value is not None:
-            weight = self.discount**self.horizon_intervals
+        if self.terminal_value is not None:  # nothing after a collision ended the episode
+            weight = self.discount**self.horizon_intervals * alive[:, None]
             observation = perfect_observation(state, pp)
             if lib is np:
                 value = to_numpy(self.terminal_value(to_torch(observation)))

@@ -6,10 +6,12 @@ import torch
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import (
     RolloutIVoIEstimator,
     RolloutValue,
     TDIVoIEstimator,
+    discounted_rollout,
     expected_voi,
     make_ivoi_estimator,
     mean_ci,
@@ -131,6 +133,9 @@ def test_ivoi_is_split_by_cam_delivery_of_the_followers_own_link():
     assert result.metrics["collision_rate"] == 0.0
     loss_rate = float(result.ivoi_sums.double().mean()) / 10
     assert loss_rate == pytest.approx(1.0 - result.metrics["cam_delivery_rate"], rel=1e-5)
+    # ξ is a 0/1 indicator: its standard deviation is that of a Bernoulli(loss rate)
+    expected_std = (loss_rate * (1.0 - loss_rate)) ** 0.5
+    assert result.metrics["ivoi_std"] == pytest.approx(expected_std, rel=1e-5)
 
 
 def test_perfect_observation_without_radio_has_no_delivery_split():
@@ -141,3 +146,28 @@ def test_perfect_observation_without_radio_has_no_delivery_split():
     )  # fmt: skip
     assert result.ivoi_delivered is None and result.ivoi_lost is None
     assert "ivoi_mean_lost" not in result.metrics
+
+
+@pytest.mark.parametrize("backend", ["torch", "numpy"])
+def test_a_collision_ends_a_rollout_as_it_ends_the_episode(backend):
+    """Scenario 0 starts with follower 1 closing on the leader at 15 m/s from 0.5 m: it
+    collides in the first interval. Its return over 5 intervals must be that interval's
+    reward with the penalty counted once (the environment terminates there), while the
+    other scenario keeps earning rewards after the first interval."""
+    params = TwinParams.from_overrides(episode_intervals=20)
+    twin = DigitalTwin(params, batch_size=2, seed=3, radio=False, backend=backend)
+    twin.reset(seed=3)
+    state = twin.platoon if backend == "torch" else twin.platoon.torch()
+    state = state.clone()
+    pp = params.platoon
+    state.position_m[0, 1] = state.position_m[0, 0] - pp.vehicle_length_m - 0.5
+    state.speed_mps[0, 1] = state.speed_mps[0, 0] + 15.0
+    if backend == "numpy":
+        state = state.numpy()
+    interval = torch.zeros(2, dtype=torch.long)
+    cacc = CACCController(pp)
+    one, _ = discounted_rollout(twin, state, interval, cacc, 1, GAMMA)
+    five, _ = discounted_rollout(twin, state, interval, cacc, 5, GAMMA)
+    assert float(one[0].sum()) < pp.collision_penalty / 2  # the penalty is in interval 1
+    torch.testing.assert_close(five[0], one[0])  # ... and nothing after it
+    assert not torch.equal(five[1], one[1])

@@ -12,6 +12,7 @@ from vdtn_marl.envs.control import PlatoonControlEnv
 from vdtn_marl.envs.radio import V2XRRAEnv
 from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
 from vdtn_marl.envs.two_timescale import TwoTimescaleEnv
+from vdtn_marl.sim.platoon import spacing_errors
 
 ATOL = 1e-5
 RTOL = 1e-5
@@ -384,3 +385,54 @@ def test_reset_without_reset_key_is_full():
     assert env.twin.interval.eq(1).all()
     env.reset(TensorDict({}, batch_size=[2]))
     assert env.twin.interval.eq(0).all()
+
+
+# ---------------------------------------------------------------------- RRA burn-in
+def _reset_interval(burn_in: int, seed: int) -> torch.Tensor:
+    env = VDTNTorchRLEnv(
+        mode="rra", batch_size=4, seed=seed, episode_intervals=20, burn_in_intervals=burn_in
+    )
+    env.set_seed(seed)
+    env.reset()
+    return env.twin.interval.clone()
+
+
+def test_rra_burn_in_starts_batches_mid_episode_reproducibly():
+    starts = [_reset_interval(15, seed) for seed in range(8)]
+    for start in starts:  # one K per reset, in 0..15
+        assert (start == start[0]).all() and 0 <= int(start[0]) <= 15
+    assert len({int(s[0]) for s in starts}) > 2  # K is drawn, not fixed
+    torch.testing.assert_close(_reset_interval(15, 3), starts[3])  # and seeded
+    assert (_reset_interval(0, 3) == 0).all()  # the default starts at the episode's start
+
+
+def test_rra_burn_in_leaves_a_platoon_that_has_been_driving():
+    env = VDTNTorchRLEnv(
+        mode="rra", batch_size=4, seed=1, episode_intervals=60, burn_in_intervals=59
+    )
+    for seed in range(10):
+        env.set_seed(seed)
+        env.reset()
+        if int(env.twin.interval[0]) >= 20:
+            break
+    else:
+        pytest.fail("no reset drew K >= 20 of 0..59 in 10 tries")
+    gap_error, speed_error = spacing_errors(env.twin.platoon, env.twin.params.platoon)
+    # at reset the followers sit at the desired gap and the leader's speed; after ≥ 1 s of
+    # the leader's trace they do not
+    assert gap_error.abs().max() > 1e-2 or speed_error.abs().max() > 1e-2
+    check_env_specs(env)
+
+
+@pytest.mark.parametrize(
+    "kwargs,match",
+    [
+        ({"mode": "control", "burn_in_intervals": 5}, "only used with mode='rra'"),
+        ({"mode": "rra", "burn_in_intervals": 20}, r"burn_in_intervals=20 must be in \[0, 19\]"),
+        ({"mode": "rra", "burn_in_intervals": -1}, r"burn_in_intervals=-1 must be in"),
+        ({"mode": "rra", "burn_in_intervals": 2.5}, "must be an integer"),
+    ],
+)
+def test_bad_burn_in_raises(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        VDTNTorchRLEnv(episode_intervals=20, **kwargs)

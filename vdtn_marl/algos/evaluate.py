@@ -65,18 +65,23 @@ METRIC_DOC = {
     "ivoi_mean_delivered": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was "
     "delivered within its interval",
     "ivoi_mean_lost": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was not",
+    "ivoi_std": "standard deviation of IVoI ξ (unscaled) over the live follower-intervals: the "
+    "noise a delivered − lost difference is learned against",
 }
 
 
 class _MaskedMean:
-    """Per-scenario sums and counts of the masked entries of [B, F] values."""
+    """Per-scenario sums, sums of squares and counts of the masked entries of [B, F] values."""
 
     def __init__(self, batch: int, device: torch.device):
         self.total = torch.zeros(batch, dtype=torch.float64, device=device)
+        self.total_sq = torch.zeros(batch, dtype=torch.float64, device=device)
         self.count = torch.zeros(batch, dtype=torch.float64, device=device)
 
     def add(self, values: torch.Tensor, mask: torch.Tensor) -> None:
-        self.total += torch.where(mask, values, torch.zeros_like(values)).sum(-1)
+        masked = torch.where(mask, values, torch.zeros_like(values))
+        self.total += masked.sum(-1)
+        self.total_sq += masked.square().sum(-1)
         self.count += mask.double().sum(-1)
 
     def per_scenario(self) -> torch.Tensor:
@@ -87,6 +92,14 @@ class _MaskedMean:
         """Mean over every added entry (NaN if none)."""
         count = float(self.count.sum())
         return float(self.total.sum()) / count if count else float("nan")
+
+    def pooled_std(self) -> float:
+        """Population standard deviation over every added entry (NaN if none)."""
+        count = float(self.count.sum())
+        if not count:
+            return float("nan")
+        mean = float(self.total.sum()) / count
+        return max(float(self.total_sq.sum()) / count - mean * mean, 0.0) ** 0.5
 
 
 def _bind(policy, twin: DigitalTwin):
@@ -153,6 +166,7 @@ def evaluate_system(
     by_delivery = radio and ivoi_estimator is not None  # ξ split by CAM delivery
     xi_delivered = _MaskedMean(b, dev)
     xi_lost = _MaskedMean(b, dev)
+    xi_all = _MaskedMean(b, dev)
     latencies = []
     gap_trace, speed_trace = [], []
     t = params.platoon.subframes_per_interval
@@ -176,6 +190,7 @@ def evaluate_system(
         if ivoi_estimator is not None:
             xi = ivoi_estimator(twin, record).double()
             ivoi_sums += weight * live * xi
+            xi_all.add(xi, alive[:, None].expand(b, f))
         reward_sum += (live * reward).sum()
         gap_sum += (live * record.gap_error_m.abs().double()).sum()
         speed_sum += (live * record.speed_error_mps.abs().double()).sum()
@@ -204,6 +219,8 @@ def evaluate_system(
         "speed_error_abs_mps": float(speed_sum / counted),
         "collision_rate": float((~alive).double().mean()),
     }
+    if ivoi_estimator is not None:
+        metrics["ivoi_std"] = xi_all.pooled_std()
     latency = torch.cat(latencies) if latencies else torch.zeros(0, dtype=torch.float64)
     if radio:
         metrics["cam_delivery_rate"] = float(cams_delivered / cams_sent)

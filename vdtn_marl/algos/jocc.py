@@ -167,6 +167,7 @@ class JointOptimisation:
                 throughput_scale=rra.throughput_scale,
                 ivoi_scale=rra.ivoi_scale,
                 miss_penalty=rra.miss_penalty,
+                burn_in_intervals=algo.rra_burn_in_intervals,
                 **completion_kw,
             )
             policy = rra_env.control_module.policy
@@ -209,18 +210,24 @@ class JointOptimisation:
             out["rra"] = self.rra
         return out
 
-    def ivoi_estimator(self, name: str):
+    def ivoi_estimator(
+        self, name: str, rollout_intervals: int | None = None, bootstrap: bool | None = None
+    ):
         """The IVoI estimator ``name`` on π*: ``td`` (π*'s critic as v*) or ``rollout`` (π*
-        for 10 intervals, then its critic). It reads the trainers' current weights."""
+        for ``rollout_intervals`` intervals, then, with ``bootstrap``, its critic; defaults:
+        ``rra.rollout_intervals`` and ``rra.rollout_bootstrap``). It reads the trainers'
+        current weights."""
         v_star = CriticValue(self.pi_star.critic, "vehicle")
         if name == "td":
             return TDIVoIEstimator(v_star, self.gamma)
         if name == "rollout":
+            rra = self.cfg.rra
+            bootstrap = rra.rollout_bootstrap if bootstrap is None else bootstrap
             return RolloutIVoIEstimator(
                 ActorPolicy(self.pi_star.actor, "vehicle"),
-                horizon_intervals=10,
+                horizon_intervals=rollout_intervals or rra.rollout_intervals,
                 discount=self.gamma,
-                terminal_value=v_star,
+                terminal_value=v_star if bootstrap else None,
             )
         raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
 

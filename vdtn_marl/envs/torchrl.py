@@ -78,6 +78,13 @@ class VDTNTorchRLEnv(EnvBase):
             vehicle observations (those of the ``vehicle`` group and those ``control_module``
             reads): ``"none"``, ``"hold"``, ``"kalman"``, ``"learned"`` or a completer object
             (:mod:`vdtn_marl.sim.completion`, docs/model.md §4.7); a no-op in ``"control"``.
+        burn_in_intervals: ``"rra"`` only: a full reset then drives every scenario for K
+            control intervals, K drawn uniformly from 0..``burn_in_intervals`` (one K per
+            reset, from the twin's generator), with ``control_module`` on impaired observations
+            and uniformly random RRA actions, and no reward; so RRA agents that collect short
+            rollouts from reset also see the platoon mid-episode, where a CAM's content matters
+            (at reset the platoon is in equilibrium). A scenario that collides during the
+            burn-in starts anew. Must leave at least one interval of the episode.
         **model_kwargs: model parameters for :meth:`TwinParams.from_overrides`
             (e.g. ``num_vehicles=6``, ``episode_intervals=100``).
     """
@@ -103,6 +110,7 @@ class VDTNTorchRLEnv(EnvBase):
         trace_source: str | TraceSource | None = None,
         completion="none",
         completion_predictor=None,
+        burn_in_intervals: int = 0,
         **model_kwargs,
     ):
         if mode not in MODES:
@@ -171,6 +179,16 @@ class VDTNTorchRLEnv(EnvBase):
                 ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
             )
         self.completion = make_completion(completion, completion_predictor, pp)
+        if isinstance(burn_in_intervals, bool) or not isinstance(burn_in_intervals, int):
+            raise ConfigError(f"burn_in_intervals={burn_in_intervals!r} must be an integer")
+        if burn_in_intervals and mode != "rra":
+            raise ConfigError(f"burn_in_intervals is only used with mode='rra', not mode={mode!r}")
+        if not 0 <= burn_in_intervals < params.episode_intervals:
+            raise ConfigError(
+                f"burn_in_intervals={burn_in_intervals!r} must be in "
+                f"[0, {params.episode_intervals - 1}] (episode_intervals − 1)"
+            )
+        self.burn_in_intervals = burn_in_intervals
         self._bandwidth_hz = params.radio.subchannel_bandwidth_hz
         self._subframe_s = pp.subframe_s
         self._vehicle_obs: torch.Tensor | None = None
@@ -311,6 +329,31 @@ class VDTNTorchRLEnv(EnvBase):
             actions = self.rra_policy(twin.rra_observation())
             twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
 
+    def _burn_in(self) -> None:
+        """Drive every scenario for K ~ U{0..``burn_in_intervals``} intervals (see __init__)."""
+        twin = self.twin
+        dev = self.device
+        draw = torch.randint(
+            0, 2**31 - 1, (2,), generator=twin.generator, device=twin.generator.device
+        ).tolist()
+        intervals = draw[0] % (self.burn_in_intervals + 1)
+        rra = RandomRRAPolicy(self.num_actions, draw[1])
+        for _ in range(intervals):
+            for _ in range(twin.subframes_per_interval):
+                actions = rra(twin.rra_observation())
+                twin.step_subframe(torch.as_tensor(actions, device=dev).long(), validated=True)
+            record = twin.finish_interval(
+                self.control_module(self._impaired_vehicle_obs()), perfect=False
+            )
+            collided = record.collided.any(-1)
+            if bool(collided.any()):
+                if not bool(collided.all()):
+                    twin.begin_interval(~collided)
+                twin.reset(mask=collided)
+                self.completion.reset(collided)
+            else:
+                twin.begin_interval()
+
     def _impaired_vehicle_obs(self, mask: torch.Tensor | None = None) -> torch.Tensor:
         """Impaired vehicle observations [B, F, 8] after completion (docs/model.md §4.7)."""
         obs = self.twin.vehicle_observation(perfect=False)
@@ -380,6 +423,8 @@ class VDTNTorchRLEnv(EnvBase):
             self.completion.reset()
             if self.mode == "control_impaired":
                 self._run_radio()
+            if self.burn_in_intervals:
+                self._burn_in()
         elif bool(mask.any()):
             subframe = twin.subframe
             twin.reset(mask=mask)
