@@ -9,10 +9,11 @@ default with κ1 = 0 (the VoI term only; ``--kappa1`` adds the V2I throughput te
 so with κ1 = 0 the only thing that pays is CAM delivery. ``--effect`` defaults to what
 ``benchmarks/ivoi_signal.py`` measured for the ``td`` estimator under random RRA (0.035 per
 interval, unscaled), ``--noise`` to multiples of ξ's per-interval standard deviation there
-(≈ 0.1). With no noise the learner should deliver far more CAMs than random RRA (≈ 16 %); the
-noise at which it stops doing so is how much noise a useful IVoI estimator may carry at this
-budget. Budgets are those of the ``reduced`` leaderboard (8 PPO iterations for π* and π̃, 16
-for the RRA agents); the evaluation is JOCC's (16 held-out scenarios × 10 s).
+(≈ 0.1 without the intervals that end in a collision, ≈ 1.3 with them). With no noise the
+learner should deliver far more CAMs than random RRA (≈ 16 %); the noise at which it stops
+doing so is how much noise a useful IVoI estimator may carry at this budget. Budgets are
+those of the ``reduced`` leaderboard (8 PPO iterations for π* and π̃, 16 for the RRA agents);
+the evaluation is JOCC's (16 held-out scenarios × 10 s).
 
 Writes ``benchmarks/results/ivoi_noise.json`` atomically. Example (the committed JSON):
 
