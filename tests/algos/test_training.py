@@ -323,3 +323,16 @@ def test_each_group_gets_the_gae_lambda_and_discount_of_its_clock(tmp_path):
         estimator = loop.trainers()[name].loss.value_estimator
         assert float(estimator.gamma) == pytest.approx(gamma), name
         assert float(estimator.lmbda) == pytest.approx(lmbda), name
+
+
+def test_rra_agents_collect_after_the_configured_burn_in(tmp_path):
+    algo = replace(TINY_ALGO, rra_burn_in_intervals=7)
+    loop = JointOptimisation(tiny_config(algo=algo), tmp_path)
+    env = loop.rra.env
+    assert env.burn_in_intervals == 7
+    starts = set()
+    for iteration in range(6):
+        loop.rra.collect(iteration)  # a fresh reset, then the batch
+        starts.add(int(env.twin.interval[0]))
+    # each batch began after 0..7 intervals (plus the batch's own), not always at 0
+    assert len(starts) > 1
