@@ -40,21 +40,8 @@ def checkpoint(tmp_path_factory) -> Path:
     run_dir = tmp_path_factory.mktemp("jocc")
     cfg = RunConfig(
         scenario=ScenarioConfig(episode_intervals=20),
-        algo=AlgoConfig(
-            num_envs=4,
-            rollout_steps=10,
-            rra_num_envs=4,
-            rra_rollout_steps=50,
-            minibatch_size=64,
-            epochs=1,
-        ),  # fmt: skip
-        experiment=ExperimentConfig(
-            control_iterations=1,
-            rra_iterations=1,
-            eval_episodes=2,
-            eval_intervals=20,
-            checkpoint_every=0,
-        ),  # fmt: skip
+        algo=TINY_ALGO,
+        experiment=TINY_EXPERIMENT,
         progress=False,
     )
     JointOptimisation(replace(cfg, seed=3), run_dir).run()
@@ -180,6 +167,8 @@ def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
     loop.cfg = replace(loop.cfg, rra=rra)
     configured = loop.ivoi_estimator("rollout")
     assert configured.horizon_intervals == 4 and configured.terminal_value is None
+    with pytest.raises(ValueError, match="horizon_intervals=0 must be >= 1"):
+        loop.ivoi_estimator("rollout", rollout_intervals=0)
     out = tmp_path / "specs.json"
     args = ["--episodes", "3", "--rra", "random", "--estimators", "rollout:1,rollout:12:mc"]
     assert script.main([str(checkpoint), *args, "--output", str(out)]) == 0

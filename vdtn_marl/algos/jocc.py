@@ -225,7 +225,9 @@ class JointOptimisation:
             bootstrap = rra.rollout_bootstrap if bootstrap is None else bootstrap
             return RolloutIVoIEstimator(
                 ActorPolicy(self.pi_star.actor, "vehicle"),
-                horizon_intervals=rollout_intervals or rra.rollout_intervals,
+                horizon_intervals=(
+                    rra.rollout_intervals if rollout_intervals is None else rollout_intervals
+                ),
                 discount=self.gamma,
                 terminal_value=v_star if bootstrap else None,
             )

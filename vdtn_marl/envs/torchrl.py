@@ -321,27 +321,26 @@ class VDTNTorchRLEnv(EnvBase):
         return action.long()
 
     # ------------------------------------------------------------------ radio
-    def _run_radio(self, mask: torch.Tensor | None = None) -> None:
-        """Run the interval's T subframes with ``rra_policy``; with ``mask`` [B] only the masked
-        scenarios keep the result (the others had already run this interval)."""
+    def _run_radio(self, mask: torch.Tensor | None = None, policy: Callable | None = None) -> None:
+        """Run the interval's T subframes with ``policy`` (default ``rra_policy``); with
+        ``mask`` [B] only the masked scenarios keep the result (the others had already run this
+        interval)."""
         twin = self.twin
+        policy = policy or self.rra_policy
         for _ in range(twin.subframes_per_interval):
-            actions = self.rra_policy(twin.rra_observation())
+            actions = policy(twin.rra_observation())
             twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
 
     def _burn_in(self) -> None:
         """Drive every scenario for K ~ U{0..``burn_in_intervals``} intervals (see __init__)."""
         twin = self.twin
-        dev = self.device
         draw = torch.randint(
             0, 2**31 - 1, (2,), generator=twin.generator, device=twin.generator.device
         ).tolist()
         intervals = draw[0] % (self.burn_in_intervals + 1)
         rra = RandomRRAPolicy(self.num_actions, draw[1])
         for _ in range(intervals):
-            for _ in range(twin.subframes_per_interval):
-                actions = rra(twin.rra_observation())
-                twin.step_subframe(torch.as_tensor(actions, device=dev).long(), validated=True)
+            self._run_radio(policy=rra)
             record = twin.finish_interval(
                 self.control_module(self._impaired_vehicle_obs()), perfect=False
             )
