@@ -13,8 +13,11 @@ IVoI estimator of ``--estimators``: ``td`` (π*'s critic), ``rollout`` (as the r
 it: ``rra.rollout_intervals`` intervals of π*, 10 by default, then with
 ``rra.rollout_bootstrap`` the critic), ``rollout:H`` (H intervals, then the critic; ``rollout:1``
 is the actual command's TD error minus π*'s own, both over the same trace) or ``rollout:H:mc``
-(H intervals and no critic: for large H the critic-free reference). Reported per checkpoint ×
-RRA policy × estimator:
+(H intervals and no critic: for large H the critic-free reference); a ``:lost`` suffix
+(``rollout:1:lost``, ``rollout:100:mc:lost``) compares the actual command with the one a lost
+CAM would have led to instead of with π*'s (the ``cam_lost`` baseline: exactly 0 where the CAM
+was not in time, so its delivered − lost is the immediate value of the delivery). Reported per
+checkpoint × RRA policy × estimator:
 
 - CAM delivery rate, collision rate (fraction of scenarios), control cost;
 - EVoI = J̃ − J* (discounted control return per follower, paired by scenario) and the IVoI
@@ -57,12 +60,12 @@ from rich.console import Console
 from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
-from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
+from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.benchmarking import parse_names, provenance
-from vdtn_marl.config import IVOI_ESTIMATORS, from_dict
+from vdtn_marl.config import IVOI_ESTIMATORS
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi, mean_ci
@@ -96,19 +99,23 @@ def _ci(samples: torch.Tensor) -> dict[str, float | int]:
 
 
 def parse_estimators(text: str) -> list[str]:
-    """Estimator specs (see the module doc) from ``"td,rollout:100:mc"``."""
+    """Estimator specs (see the module doc) from ``"td,rollout:100:mc,rollout:1:lost"``."""
     specs = [part.strip() for part in text.split(",") if part.strip()]
     usage = (
         f"--estimators {text!r} must list some of {', '.join(IVOI_ESTIMATORS)}, "
-        "rollout:H or rollout:H:mc (H an integer >= 1)"
+        "rollout:H, rollout:H:mc, rollout:H:lost or rollout:H:mc:lost (H an integer >= 1)"
     )
     if not specs:
         raise SystemExit(usage)
     for spec in specs:
         name, *rest = spec.split(":")
-        if name not in IVOI_ESTIMATORS or (rest and name != "rollout") or len(rest) > 2:
+        if name not in IVOI_ESTIMATORS or (rest and name != "rollout"):
             raise SystemExit(usage)
-        if rest and (not rest[0].isdigit() or int(rest[0]) < 1 or rest[1:] not in ([], ["mc"])):
+        if rest and (
+            not rest[0].isdigit()
+            or int(rest[0]) < 1
+            or rest[1:] not in ([], ["mc"], ["lost"], ["mc", "lost"])
+        ):
             raise SystemExit(usage)
     return specs
 
@@ -120,8 +127,12 @@ def make_estimator(loop: JointOptimisation, spec: str, clip: float | None = None
     if not rest:
         estimator = loop.ivoi_estimator(name)
     else:
-        bootstrap = rest[1:] != ["mc"]
-        estimator = loop.ivoi_estimator(name, rollout_intervals=int(rest[0]), bootstrap=bootstrap)
+        estimator = loop.ivoi_estimator(
+            name,
+            rollout_intervals=int(rest[0]),
+            bootstrap="mc" not in rest[1:],
+            baseline="cam_lost" if "lost" in rest[1:] else "optimal",
+        )
     return estimator if clip is None else ClippedIVoI(estimator, clip)
 
 
@@ -134,28 +145,17 @@ class ClippedIVoI:
         self.estimator = estimator
         self.clip = clip
 
+    @property
+    def needs_command_if_lost(self) -> bool:
+        return getattr(self.estimator, "needs_command_if_lost", False)
+
     def __call__(self, twin, record) -> torch.Tensor:
         return self.estimator(twin, record).clamp(-self.clip, self.clip)
 
 
 def load_run(path: Path, scratch: Path) -> JointOptimisation:
-    """The JOCC loop of a checkpoint, with every trainer's weights loaded; its run directory
-    is ``scratch`` (nothing is written next to the checkpoint)."""
-    payload = load_checkpoint(path)
-    try:
-        cfg = from_dict(payload["config"])
-    except (KeyError, TypeError) as err:
-        raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
-    task = payload.get("task")
-    if cfg.control.name == "learned" and task not in ("jocc", "control_impaired"):
-        raise CheckpointError(
-            f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
-            "use a checkpoint of a jocc or control_impaired run"
-        )
-    cfg.threads = 0  # the caller sets the threads
-    loop = JointOptimisation(cfg, scratch, task="jocc")
-    loop.load_policies(payload)
-    return loop
+    """The JOCC loop of a checkpoint with π̃ (:meth:`JointOptimisation.from_checkpoint`)."""
+    return JointOptimisation.from_checkpoint(path, scratch, needs_pi_tilde=True)
 
 
 def measure(
@@ -342,7 +342,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--estimators",
         default="td,rollout",
-        help=f"IVoI estimators: {', '.join(IVOI_ESTIMATORS)}, rollout:H, rollout:H:mc",
+        help=f"IVoI estimators: {', '.join(IVOI_ESTIMATORS)}, rollout:H[:mc][:lost]",
     )
     parser.add_argument(
         "--episodes", type=int, default=64, help="held-out scenarios per evaluation (>= 2)"

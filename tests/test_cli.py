@@ -221,6 +221,8 @@ BAD_CONFIGS = [
     (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
     (["algo.rra_burn_in_intervals=200"], "algo.rra_burn_in_intervals=200"),
     (["rra.rollout_intervals=0"], "rra.rollout_intervals=0"),
+    (["rra.ivoi_baseline=best"], "rra.ivoi_baseline='best'"),
+    (["rra.ivoi_baseline=cam_lost"], "rra.ivoi_baseline='cam_lost' needs rra.ivoi_estimator"),
     (["scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.foo=1"], "scenario.foo=1"),
     (["+scenario.model.foo=1"], "scenario.model.foo=1"),

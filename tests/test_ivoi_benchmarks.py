@@ -153,7 +153,11 @@ def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
     assert script.parse_estimators("td, rollout:1,rollout:12:mc") == [
         "td", "rollout:1", "rollout:12:mc"
     ]  # fmt: skip
-    for bad in ("rollout:0", "rollout:x", "td:5", "rollout:5:nope", "paired", ""):
+    assert script.parse_estimators("rollout:1:lost,rollout:9:mc:lost") == [
+        "rollout:1:lost", "rollout:9:mc:lost"
+    ]  # fmt: skip
+    bad_specs = ("rollout:0", "rollout:x", "td:5", "rollout:5:nope", "rollout:5:lost:mc", "")
+    for bad in (*bad_specs, "paired", "td:lost"):
         with pytest.raises(SystemExit, match="must list some of td, rollout"):
             script.parse_estimators(bad)
     loop = script.load_run(checkpoint, tmp_path / "scratch")
@@ -163,6 +167,12 @@ def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
     assert short.horizon_intervals == 1 and short.terminal_value is not None
     mc = script.make_estimator(loop, "rollout:12:mc")
     assert mc.horizon_intervals == 12 and mc.terminal_value is None
+    assert short.baseline == mc.baseline == "optimal"
+    lost = script.make_estimator(loop, "rollout:9:mc:lost")
+    assert lost.baseline == "cam_lost" and lost.terminal_value is None
+    assert script.make_estimator(loop, "rollout:1:lost", clip=1.0).needs_command_if_lost
+    with pytest.raises(ValueError, match="needs the rollout estimator"):
+        loop.ivoi_estimator("td", baseline="cam_lost")
     rra = replace(loop.cfg.rra, rollout_intervals=4, rollout_bootstrap=False)
     loop.cfg = replace(loop.cfg, rra=rra)
     configured = loop.ivoi_estimator("rollout")
@@ -182,3 +192,38 @@ def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
     assert data["clip"] == 1e-6
     for row in data["runs"][0]["rows"]:
         assert row["ivoi_std"] <= 1e-6 and abs(row["ivoi_sum"]["mean"]) <= 20 * 1e-6
+
+
+def test_lost_baseline_is_zero_on_lost_cams_in_the_signal_benchmark(checkpoint, tmp_path):
+    out = tmp_path / "lost.json"
+    args = ["--episodes", "3", "--rra", "random", "--estimators", "rollout:1:lost"]
+    assert _script().main([str(checkpoint), *args, "--output", str(out)]) == 0
+    (row,) = json.loads(out.read_text())["runs"][0]["rows"]
+    assert row["ivoi_lost"]["mean"] == 0.0 and row["ivoi_delivered"]["n"] == 3
+
+
+def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, tmp_path):
+    """The one-step credit is computed in one copy, as an environment would; the td credit
+    from the two paired copies. With one interval of horizon the value is the platoon's reward
+    difference in the interval of the drop, and the credits agree closely (they differ only in
+    what the other followers do in the one-step branches)."""
+    script = _load("cam_value")
+    out = tmp_path / "value.json"
+    args = ["--episodes", "8", "--starts", "4,9", "--horizon", "1", "--no-progress"]
+    assert script.main([str(checkpoint), *args, "--output", str(out)]) == 0
+    data = json.loads(out.read_text())
+    result = data["runs"][0]["result"]
+    assert data["horizon"] == 1 and result["rra"] == "random"
+    assert 0 < result["cams"] <= 16  # at most one dropped CAM per scenario and start
+    assert result["value"]["n"] == result["td_credit"]["n"] == result["cams"]
+    assert result["td_credit"]["mean"] == pytest.approx(
+        result["one_step_credit"]["mean"], abs=0.05 + 0.2 * abs(result["td_credit"]["mean"])
+    )
+    for bad, message in (
+        (["--starts", "19", "--horizon", "5"], "must lie in"),
+        (["--rra", "best"], "is not one of"),
+        (["--episodes", "1"], "must be >= 2"),
+    ):
+        with pytest.raises(SystemExit, match=message):
+            script.main([str(checkpoint), *bad, "--output", str(tmp_path / "x.json")])
+    assert not (tmp_path / "x.json").exists()

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
 from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.voi import IVOI_BASELINES
 
 ALGOS = ("mappo", "ippo")
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
@@ -125,6 +126,9 @@ class RRAConfig:
     ivoi_estimator: str = "td"
     rollout_intervals: int = 10  # rollout estimator: intervals rolled out with π*
     rollout_bootstrap: bool = True  # rollout estimator: π*'s critic values the tail
+    # rollout estimator: ξ compares the actual command with π*'s ("optimal", the paper's IVoI)
+    # or with the one a lost CAM would have led to ("cam_lost", a difference reward)
+    ivoi_baseline: str = "optimal"
     throughput_scale: float = 0.004  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = 20.0  # multiplies ξ before κ2
     miss_penalty: float = 1.0  # drra: penalty of a CAM that misses its interval
@@ -215,6 +219,12 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive_int("rra.rollout_intervals", r.rollout_intervals, high=100_000)
     if not isinstance(r.rollout_bootstrap, bool):
         raise ConfigError(f"rra.rollout_bootstrap={r.rollout_bootstrap!r} must be true or false")
+    _choice("rra.ivoi_baseline", r.ivoi_baseline, IVOI_BASELINES)
+    if r.ivoi_baseline != "optimal" and r.ivoi_estimator != "rollout":
+        raise ConfigError(
+            f"rra.ivoi_baseline={r.ivoi_baseline!r} needs rra.ivoi_estimator=rollout "
+            f"(got {r.ivoi_estimator!r}; td must compare with π*: rra.ivoi_baseline=optimal)"
+        )
     _choice("task", cfg.task, TASKS)
     _real("rra.kappa1", r.kappa1, 0.0, 1.0)
     if r.kappa2 is not None:

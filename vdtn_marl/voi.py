@@ -321,18 +321,31 @@ class RolloutValue:
         return returns
 
 
+#: what ξ compares the acting system's command with (:class:`RolloutIVoIEstimator`)
+IVOI_BASELINES = ("optimal", "cam_lost")
+
+
 class RolloutIVoIEstimator:
     """Counterfactual Monte-Carlo rollouts in the twin (the reference estimator).
 
-    From the perfect state S_k, F + 1 branches are rolled out for ``horizon_intervals``
-    intervals over the known leader trace: branch 0 lets every follower follow the reference
-    policy on perfect observations; branch i replaces follower i's first command by what the
-    acting system did (its u_k and switch subframe). ξ_i is the difference of follower i's
-    discounted control return between branch i and branch 0. Platoon dynamics are
-    deterministic given the trace, so one rollout per branch is exact for that reference and
-    horizon. A collision ends a branch's episode (its penalty counts once, as in the
-    environment). With ``terminal_value`` (a callable on perfect observations [.., F, 8] → [.., F])
-    the tail beyond the horizon is bootstrapped.
+    From the perfect state S_k, branches are rolled out for ``horizon_intervals`` intervals over
+    the known leader trace. In a branch that tests follower i's command, follower i plays that
+    command (with its switch subframe) in the first interval while every other follower
+    follows the reference policy on perfect observations; afterwards everyone does. A
+    collision ends a branch's episode (its penalty counts once, as in the environment). With
+    ``terminal_value`` (a callable on perfect observations [.., F, 8] → [.., F]) the tail
+    beyond the horizon is bootstrapped. Platoon dynamics are deterministic given the trace, so
+    one rollout per branch is exact for that reference and horizon.
+
+    ``baseline`` says what follower i's actual command is compared with:
+
+    - ``"optimal"`` (the paper's IVoI, docs/model.md §5): the reference policy's own command;
+      ξ_i = Q*(S_k, ũ_k) − V*(S_k), F + 1 branches;
+    - ``"cam_lost"`` (a difference reward): the command follower i would have taken had its
+      CAM of interval k been lost (``record.command_if_lost_mps2``, taking force at the next
+      interval); ξ_i = Q*(S_k, ũ_k) − Q*(S_k, ũ_k^lost) = IVoI(delivered) − IVoI(had it been
+      lost), the value of this interval's delivery, with the same leader trace on both sides
+      (common random numbers), and exactly 0 where the CAM was not in time. 2F branches.
     """
 
     def __init__(
@@ -341,54 +354,100 @@ class RolloutIVoIEstimator:
         horizon_intervals: int = 10,
         discount: float = 0.99,
         terminal_value: Policy | None = None,
+        baseline: str = "optimal",
     ):
         _check_rollout(horizon_intervals, discount)
+        if baseline not in IVOI_BASELINES:
+            raise ValueError(f"baseline={baseline!r} is not one of {', '.join(IVOI_BASELINES)}")
         self.reference_policy = reference_policy
         self.horizon_intervals = horizon_intervals
         self.discount = discount
         self.terminal_value = terminal_value
+        self.baseline = baseline
+
+    @property
+    def needs_command_if_lost(self) -> bool:
+        """True when the environment must record ``command_if_lost_mps2``."""
+        return self.baseline == "cam_lost"
 
     def __call__(self, twin: DigitalTwin, record: IntervalRecord) -> torch.Tensor:
         policy = self.reference_policy or CACCController(twin.params.platoon)
+        inputs = [record.command_mps2, record.switch_subframe]
+        if self.needs_command_if_lost:
+            if record.command_if_lost_mps2 is None:
+                raise ValueError(
+                    "the cam_lost IVoI baseline needs record.command_if_lost_mps2, the command "
+                    "each follower would have taken had its CAM been lost; pass "
+                    "command_if_lost_mps2= to DigitalTwin.finish_interval"
+                )
+            inputs.append(record.command_if_lost_mps2)
         if not _numpy_path(twin, policy):
-            return self._estimate(
-                twin, policy, record.state_before, record.interval,
-                record.command_mps2, record.switch_subframe,
-            )  # fmt: skip
+            return self._estimate(twin, policy, record.state_before, record.interval, *inputs)
         xi = self._estimate(
             twin,
             policy,
             record.state_before.numpy(),
             to_numpy(record.interval),
-            to_numpy(record.command_mps2),
-            to_numpy(record.switch_subframe),
+            *(to_numpy(x) for x in inputs),
         )
         return to_torch(xi)
 
-    def _estimate(self, twin, policy, state_before, interval, command, switch_subframe):
+    def _estimate(
+        self, twin, policy, state_before, interval, command, switch, command_if_lost=None
+    ):
         """ξ [B, F] on torch tensors or NumPy arrays (all inputs alike)."""
-        pp = twin.params.platoon
-        b, f = command.shape
-        branches = f + 1
         lib = xp(command)
+        if command_if_lost is None:
+            reference, (actual,) = self._branch_returns(
+                twin, policy, state_before, interval, [(command, switch)], reference=True
+            )
+            return actual - reference
+        t = twin.subframes_per_interval
+        _, (actual, lost) = self._branch_returns(
+            twin, policy, state_before, interval,
+            [(command, switch), (command_if_lost, lib.full_like(switch, t))], reference=False,
+        )  # fmt: skip
+        in_time = switch < t  # otherwise both branches are the same interval
+        return lib.where(in_time, actual - lost, lib.zeros_like(actual))
+
+    def _branch_returns(self, twin, policy, state_before, interval, alternatives, reference):
+        """Follower i's discounted return when it plays each alternative (command [B, F],
+        switch [B, F]) in the first interval and the others play the reference policy: one
+        [B, F] per alternative; with ``reference``, first the return when everyone plays it
+        (else None). One batched rollout of 1 + F·A (or F·A) branches."""
+        pp = twin.params.platoon
+        b, f = alternatives[0][0].shape
+        lib = xp(alternatives[0][0])
+        offset = 1 if reference else 0
+        branches = offset + f * len(alternatives)
 
         state: PlatoonState = state_before.repeat(branches)
         if _is_linear_cacc(policy):  # same numbers, fewer operations
             reference_u = policy.perfect_command(state_before, pp)  # [B, F]
         else:
             reference_u = policy(perfect_observation(state_before, pp))
-        # deviates[j, :, i] is True when branch j replays follower i's actual interval
+        # deviates[j, :, i]: branch j tests follower i (alternative (j - offset) // F)
         if lib is np:
             branch, follower = np.arange(branches), np.arange(f)
         else:
-            branch = torch.arange(branches, device=command.device)
-            follower = torch.arange(f, device=command.device)
-        deviates = branch[:, None, None] == follower[None, None, :] + 1
-        deviates = deviates.repeat(b, axis=1) if lib is np else deviates.expand(branches, b, f)
-        u = lib.where(deviates, command, reference_u).reshape(branches * b, f)
-        switch = lib.where(deviates, switch_subframe, lib.zeros_like(switch_subframe)).reshape(
-            branches * b, f
-        )
+            device = reference_u.device
+            branch = torch.arange(branches, device=device)
+            follower = torch.arange(f, device=device)
+        tested = (branch - offset) % f
+        deviates = (branch[:, None] >= offset) & (tested[:, None] == follower[None, :])
+        deviates = deviates[:, None, :]  # [branches, 1, F]
+        if lib is np:
+            u = np.repeat(reference_u[None], branches, axis=0)
+            switch = np.zeros((branches, b, f), np.int64)
+        else:
+            u = reference_u[None].expand(branches, b, f)
+            switch = torch.zeros(branches, b, f, dtype=torch.long, device=reference_u.device)
+        for a, (command, first_switch) in enumerate(alternatives):
+            block = deviates & ((branch - offset) // f == a)[:, None, None]
+            u = lib.where(block, command[None], u)
+            switch = lib.where(block, first_switch[None], switch)
+        u = u.reshape(branches * b, f)
+        switch = switch.reshape(branches * b, f)
 
         rollout = _cacc_rollout_numpy if lib is np else _rollout
         returns, state, alive = rollout(
@@ -404,8 +463,11 @@ class RolloutIVoIEstimator:
                 value = self.terminal_value(observation)
             returns = returns + weight * value
         returns = returns.reshape(branches, b, f)
-        actual = returns[1:].diagonal(0, 0, 2)  # [B, F]: branch i+1, follower i
-        return actual - returns[0]
+        per_alternative = [  # [B, F]: branch offset + a·F + i, follower i
+            returns[offset + a * f : offset + (a + 1) * f].diagonal(0, 0, 2)
+            for a in range(len(alternatives))
+        ]
+        return (returns[0] if reference else None), per_alternative
 
 
 class TDIVoIEstimator:
@@ -450,6 +512,32 @@ class ZeroIVoIEstimator:
 
     def __call__(self, twin: DigitalTwin, record: IntervalRecord) -> torch.Tensor:
         return torch.zeros_like(record.reward)
+
+
+def close_interval(
+    twin: DigitalTwin,
+    estimator: IVoIEstimator | None,
+    decide: Callable[[bool], torch.Tensor] | None,
+    perfect: bool = False,
+    commands: torch.Tensor | None = None,
+) -> IntervalRecord:
+    """Finish the twin's interval for ``estimator``: the followers' commands are ``commands``
+    or ``decide(False)`` (the acting policy on the observation of the actual CAMs); when the
+    estimator compares with a lost CAM (``needs_command_if_lost``), ``decide(True)`` (the same
+    policy on the observation had the CAMs been lost) is recorded too, and called first, so
+    that a stateful completer ends on the actual CAMs."""
+    command_if_lost = None
+    if not perfect and getattr(estimator, "needs_command_if_lost", False):
+        if decide is None:
+            raise ValueError(
+                "this IVoI estimator needs the command each follower would have taken had its "
+                "CAM been lost, which only a control module can give: the followers' commands "
+                "here come from the vehicle agents"
+            )
+        command_if_lost = decide(True)
+    if commands is None:
+        commands = decide(False)
+    return twin.finish_interval(commands, perfect, command_if_lost_mps2=command_if_lost)
 
 
 def make_ivoi_estimator(spec: str | IVoIEstimator | None, **kwargs) -> IVoIEstimator:

@@ -10,7 +10,14 @@ from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
-from vdtn_marl.config import AlgoConfig, ExperimentConfig, RunConfig, ScenarioConfig, to_dict
+from vdtn_marl.config import (
+    AlgoConfig,
+    ExperimentConfig,
+    RRAConfig,
+    RunConfig,
+    ScenarioConfig,
+    to_dict,
+)
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
@@ -336,3 +343,24 @@ def test_rra_agents_collect_after_the_configured_burn_in(tmp_path):
         starts.add(int(env.twin.interval[0]))
     # each batch began after 0..7 intervals (plus the batch's own), not always at 0
     assert len(starts) > 1
+
+
+def test_jocc_hands_the_configured_ivoi_baseline_to_the_rra_environment(tmp_path):
+    """rra.ivoi_baseline=cam_lost: the RRA agents train on the difference reward. With κ1 = 0
+    their reward is κ2·s_ξ·ξ at the last subframe of each interval and nothing else, and ξ is
+    0 exactly where a CAM missed its interval."""
+    rra = RRAConfig(
+        kappa1=0.0, ivoi_estimator="rollout", rollout_intervals=2, ivoi_baseline="cam_lost"
+    )
+    algo = replace(TINY_ALGO, rra_rollout_steps=100)  # at rest in interval 0, ξ is 0 there
+    loop = JointOptimisation(tiny_config(rra=rra, algo=algo), tmp_path)
+    estimator = loop.rra.env.ivoi_estimator
+    assert estimator.baseline == "cam_lost" and estimator.horizon_intervals == 2
+    reward = loop.rra.collect(0)["next", "rra", "reward"][..., 0]  # [B, subframes, links]
+    t = loop.params.platoon.subframes_per_interval
+    closing = torch.arange(reward.shape[1]) % t == t - 1
+    assert closing.any()
+    assert (reward[:, ~closing] == 0).all()
+    at_close = reward[:, closing]
+    assert (at_close != 0).any() and (at_close == 0).any()  # delivered and lost CAMs
+    assert loop.ivoi_estimator("rollout").baseline == "optimal"  # the default

@@ -131,6 +131,29 @@ def test_kappa2_ivoi_term_only_at_last_subframe_and_equals_infos():
     assert nonzero > 0
 
 
+def test_cam_lost_ivoi_pays_only_for_cams_that_arrived_in_time():
+    """With the cam_lost baseline the V2X RRA env's ξ_i is 0 whenever follower i's CAM did not
+    arrive within its interval, and not always 0 when it did."""
+    estimator = RolloutIVoIEstimator(horizon_intervals=3, baseline="cam_lost")
+    env = vdtn_marl.make("vdtn/v2x-rra-v0", seed=6, ivoi_estimator=estimator, kappa1=0.0)
+    env.reset(seed=6)
+    rng = np.random.default_rng(6)
+    paid = unpaid = 0
+    for _ in range(8 * T):
+        _, _, terminated, _, infos = env.step(_random_actions(env, rng, include_vehicles=False))
+        for agent in env.possible_agents:
+            if infos[agent]["closes_interval"]:
+                if infos[agent]["cam_delivered"]:
+                    paid += infos[agent]["ivoi"] != 0.0
+                else:
+                    assert infos[agent]["ivoi"] == 0.0
+                    unpaid += 1
+        assert not any(terminated.values())
+    assert paid > 0 and unpaid > 0
+    with pytest.raises(ConfigError, match="cam_lost baseline"):
+        TwoTimescaleEnv(seed=6, ivoi_estimator=estimator)
+
+
 def test_rollout_ivoi_is_zero_for_the_reference_action_and_negative_for_a_bad_one():
     env = PlatoonControlEnv(seed=0)
     env.reset(seed=0)

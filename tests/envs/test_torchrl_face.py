@@ -12,7 +12,9 @@ from vdtn_marl.envs.control import PlatoonControlEnv
 from vdtn_marl.envs.radio import V2XRRAEnv
 from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
 from vdtn_marl.envs.two_timescale import TwoTimescaleEnv
+from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.platoon import spacing_errors
+from vdtn_marl.voi import RolloutIVoIEstimator
 
 ATOL = 1e-5
 RTOL = 1e-5
@@ -198,6 +200,22 @@ def test_rra_matches_pettingzoo():
     pz = V2XRRAEnv(seed=seed, **kwargs)
     env = VDTNTorchRLEnv(mode="rra", seed=seed, **kwargs)
     _run_two_timescale(pz, env, vehicles=False, intervals=2)
+
+
+def test_rra_with_the_cam_lost_ivoi_baseline_matches_pettingzoo():
+    """Both faces ask their control module what a follower would have done had its CAM been
+    lost, and pay the same difference reward; the joint mode, without a control module,
+    refuses that estimator."""
+    seed, kwargs = 4, {"episode_intervals": 3, "kappa1": 0.3}
+
+    def estimator():
+        return RolloutIVoIEstimator(horizon_intervals=2, baseline="cam_lost")
+
+    pz = V2XRRAEnv(seed=seed, ivoi_estimator=estimator(), **kwargs)
+    env = VDTNTorchRLEnv(mode="rra", seed=seed, ivoi_estimator=estimator(), **kwargs)
+    _run_two_timescale(pz, env, vehicles=False, intervals=3)
+    with pytest.raises(ConfigError, match="cam_lost baseline.*mode='rra'"):
+        VDTNTorchRLEnv(mode="joint", seed=seed, ivoi_estimator=estimator(), **kwargs)
 
 
 # ---------------------------------------------------------------------- partial reset

@@ -21,7 +21,7 @@ from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
-from vdtn_marl.voi import IVoIEstimator
+from vdtn_marl.voi import IVoIEstimator, close_interval
 
 ControlPolicy = Callable[[torch.Tensor], torch.Tensor]  # observations [B, F, 8] → m/s² [B, F]
 RRAPolicy = Callable[[torch.Tensor], torch.Tensor]  # RRA observations [B, L, D] → long [B, L]
@@ -102,8 +102,9 @@ class _MaskedMean:
         return max(float(self.total_sq.sum()) / count - mean * mean, 0.0) ** 0.5
 
 
-def _bind(policy, twin: DigitalTwin):
-    """Policies that need the twin's true state (the oracle) expose ``bind(twin)``."""
+def bind_to_twin(policy, twin: DigitalTwin):
+    """``policy`` ready to act on ``twin``: policies that need the twin's true state (the
+    oracle, the greedy RRA) expose ``bind(twin)``; others are returned as they are."""
     return policy.bind(twin) if hasattr(policy, "bind") else policy
 
 
@@ -145,8 +146,8 @@ def evaluate_system(
     twin.reset(seed=seed)
     if radio and rra is None:
         rra = RandomRRAPolicy(params.radio.num_actions, seed)
-    control = _bind(control, twin)
-    rra = _bind(rra, twin) if rra is not None else None
+    control = bind_to_twin(control, twin)
+    rra = bind_to_twin(rra, twin) if rra is not None else None
     if hasattr(rra, "reset"):
         rra.reset()
     if completion is not None:
@@ -172,17 +173,21 @@ def evaluate_system(
     t = params.platoon.subframes_per_interval
     subframe_ms = params.platoon.subframe_s * 1000.0
     weight = 1.0
+
+    def decide(cams_lost: bool) -> torch.Tensor:
+        """The control policy's commands on this interval's observation."""
+        observation = twin.vehicle_observation(perfect, cams_lost=cams_lost)
+        if completion is not None and not perfect:
+            observation = completion.complete(observation, twin.interval)
+        return control(observation)
+
     for k in range(intervals):
         if k > 0:
             twin.begin_interval()
         if radio:
             for _ in range(t):
                 twin.step_subframe(torch.as_tensor(rra(twin.rra_observation())).long())
-        observation = twin.vehicle_observation(perfect=perfect)
-        if completion is not None and not perfect:
-            observation = completion.complete(observation, twin.interval)
-        commands = control(observation)
-        record = twin.finish_interval(commands, perfect=perfect)
+        record = close_interval(twin, ivoi_estimator, decide, perfect)
         live = alive[:, None].double()
         reward = record.reward.double()
         returns += weight * live * reward

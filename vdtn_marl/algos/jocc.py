@@ -49,7 +49,7 @@ from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
-from vdtn_marl.config import IVOI_ESTIMATORS, RunConfig, to_dict, validate
+from vdtn_marl.config import IVOI_ESTIMATORS, RunConfig, from_dict, to_dict, validate
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
@@ -153,7 +153,7 @@ class JointOptimisation:
             drop_features=drop,
             prior=cacc,
         )
-        self.estimator = self.ivoi_estimator(rra.ivoi_estimator)
+        self.estimator = self.ivoi_estimator(rra.ivoi_estimator, baseline=rra.ivoi_baseline)
         self.rra = None
         if self.rra_learned:
             rra_env = VDTNTorchRLEnv(
@@ -210,15 +210,56 @@ class JointOptimisation:
             out["rra"] = self.rra
         return out
 
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | Path, run_dir: str | Path, needs_pi_tilde: bool = False
+    ) -> JointOptimisation:
+        """The loop of a checkpoint's run (config from the checkpoint) with every trainer's
+        weights loaded, writing nothing next to the checkpoint (``run_dir`` is its run
+        directory; torch threads are left as the caller set them). ``needs_pi_tilde``
+        refuses a checkpoint of a run with learned control that trained no π̃."""
+        payload = load_checkpoint(path)
+        try:
+            cfg = from_dict(payload["config"])
+        except (KeyError, TypeError) as err:
+            raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
+        task = payload.get("task")
+        if (
+            needs_pi_tilde
+            and cfg.control.name == "learned"
+            and task
+            not in (
+                "jocc",
+                "control_impaired",
+            )
+        ):
+            raise CheckpointError(
+                f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
+                "use a checkpoint of a jocc or control_impaired run"
+            )
+        cfg.threads = 0
+        loop = cls(cfg, run_dir, task="jocc")
+        loop.load_policies(payload)
+        return loop
+
     def ivoi_estimator(
-        self, name: str, rollout_intervals: int | None = None, bootstrap: bool | None = None
+        self,
+        name: str,
+        rollout_intervals: int | None = None,
+        bootstrap: bool | None = None,
+        baseline: str = "optimal",
     ):
         """The IVoI estimator ``name`` on π*: ``td`` (π*'s critic as v*) or ``rollout`` (π*
         for ``rollout_intervals`` intervals, then, with ``bootstrap``, its critic; defaults:
-        ``rra.rollout_intervals`` and ``rra.rollout_bootstrap``). It reads the trainers'
-        current weights."""
+        ``rra.rollout_intervals`` and ``rra.rollout_bootstrap``; ``baseline``: see
+        :class:`~vdtn_marl.voi.RolloutIVoIEstimator`). It reads the trainers' current
+        weights."""
         v_star = CriticValue(self.pi_star.critic, "vehicle")
         if name == "td":
+            if baseline != "optimal":
+                raise ConfigError(
+                    f"baseline={baseline!r} needs the rollout estimator (td compares with π*)"
+                )
             return TDIVoIEstimator(v_star, self.gamma)
         if name == "rollout":
             rra = self.cfg.rra
@@ -230,6 +271,7 @@ class JointOptimisation:
                 ),
                 discount=self.gamma,
                 terminal_value=v_star if bootstrap else None,
+                baseline=baseline,
             )
         raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
 

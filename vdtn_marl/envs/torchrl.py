@@ -43,7 +43,7 @@ from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
-from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
 
 MODES = ("control", "control_impaired", "rra", "joint")
 
@@ -177,6 +177,12 @@ class VDTNTorchRLEnv(EnvBase):
             )
             self.ivoi_estimator = make_ivoi_estimator(
                 ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
+            )
+        if mode == "joint" and getattr(self.ivoi_estimator, "needs_command_if_lost", False):
+            raise ConfigError(
+                "an IVoI estimator with the cam_lost baseline needs a control module to ask "
+                "what a follower would have done had its CAM been lost: use mode='rra', "
+                "not mode='joint' (where the vehicles are agents)"
             )
         self.completion = make_completion(completion, completion_predictor, pp)
         if isinstance(burn_in_intervals, bool) or not isinstance(burn_in_intervals, int):
@@ -353,10 +359,16 @@ class VDTNTorchRLEnv(EnvBase):
             else:
                 twin.begin_interval()
 
-    def _impaired_vehicle_obs(self, mask: torch.Tensor | None = None) -> torch.Tensor:
-        """Impaired vehicle observations [B, F, 8] after completion (docs/model.md §4.7)."""
-        obs = self.twin.vehicle_observation(perfect=False)
+    def _impaired_vehicle_obs(
+        self, mask: torch.Tensor | None = None, cams_lost: bool = False
+    ) -> torch.Tensor:
+        """Impaired vehicle observations [B, F, 8] after completion (docs/model.md §4.7);
+        ``cams_lost``: as if this interval's CAMs had been lost."""
+        obs = self.twin.vehicle_observation(perfect=False, cams_lost=cams_lost)
         return self.completion.complete(obs, self.twin.interval, mask)
+
+    def _control_module_commands(self, cams_lost: bool) -> torch.Tensor:
+        return self.control_module(self._impaired_vehicle_obs(cams_lost=cams_lost))
 
     # ------------------------------------------------------------------ outputs
     def _vehicle_acts(self) -> torch.Tensor:
@@ -506,9 +518,8 @@ class VDTNTorchRLEnv(EnvBase):
         going = None
         final_rra_obs = None
         if closing:
-            if commands is None:
-                commands = self.control_module(self._impaired_vehicle_obs())
-            record = twin.finish_interval(commands, perfect=False)
+            decide = self._control_module_commands if commands is None else None
+            record = close_interval(twin, self.ivoi_estimator, decide, commands=commands)
             xi = self.ivoi_estimator(twin, record)
             lost = record.cam_delay_subframes > twin.subframes_per_interval
             rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost).to(torch.float32)

@@ -49,7 +49,8 @@ from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+from vdtn_marl.sim.params import ConfigError
+from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
 
 
 class TwoTimescaleEnv(VDTNParallelEnv):
@@ -89,6 +90,12 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
         )
         self.vehicles_are_agents = vehicles_are_agents
+        if vehicles_are_agents and getattr(self.ivoi_estimator, "needs_command_if_lost", False):
+            raise ConfigError(
+                "an IVoI estimator with the cam_lost baseline needs a control module to ask "
+                "what a follower would have done had its CAM been lost; with the vehicles as "
+                "agents (vehicles_are_agents=True) there is none: use the V2X RRA env"
+            )
         self.control_module = control_module or CACCController(twin.params.platoon)
         if not callable(self.control_module):
             raise TypeError(
@@ -147,9 +154,12 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             obs = self._completed_vehicle_observation()[0].cpu().numpy()
             self._vehicle_obs = {name: obs[i] for i, name in enumerate(self.vehicle_agents)}
 
-    def _completed_vehicle_observation(self) -> torch.Tensor:
-        obs = self.twin.vehicle_observation(perfect=False)
+    def _completed_vehicle_observation(self, cams_lost: bool = False) -> torch.Tensor:
+        obs = self.twin.vehicle_observation(perfect=False, cams_lost=cams_lost)
         return self.completion.complete(obs, self.twin.interval)
+
+    def _control_module_commands(self, cams_lost: bool) -> torch.Tensor:
+        return self.control_module(self._completed_vehicle_observation(cams_lost))
 
     def _observations(self) -> dict[str, np.ndarray]:
         rra = self._as_numpy(self.twin.rra_observation())[0].copy()
@@ -206,9 +216,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         terminated = truncated = False
         closing = ivoi = None
         if closes_interval:
-            if commands is None:
-                commands = self.control_module(self._completed_vehicle_observation())
-            record = twin.finish_interval(commands, perfect=False)
+            decide = self._control_module_commands if commands is None else None
+            record = close_interval(twin, self.ivoi_estimator, decide, commands=commands)
             self.last_record = record
             xi = self.ivoi_estimator(twin, record)
             lost = record.cam_delay_subframes > twin.subframes_per_interval

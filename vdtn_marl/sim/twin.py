@@ -72,7 +72,9 @@ class IntervalRecord:
     ``state_before``/``state_after`` are the perfect states S_k and S_{k+1}; ``interval`` [B]
     is k. ``switch_subframe`` [B, F] is when u_k took force. ``cam_delay_subframes`` [B, L]
     is the CAM delivery subframe (1..T, T+1 = lost); ``v2i_rate_bps`` [B, M] is the interval
-    mean.
+    mean. ``command_if_lost_mps2`` [B, F], when the caller gave it, is the command each
+    follower would have decided had this interval's CAM been lost (see
+    :meth:`DigitalTwin.vehicle_observation` with ``cams_lost``).
     """
 
     interval: torch.Tensor
@@ -87,6 +89,7 @@ class IntervalRecord:
     truncated: torch.Tensor
     cam_delay_subframes: torch.Tensor
     v2i_rate_bps: torch.Tensor
+    command_if_lost_mps2: torch.Tensor | None = None
 
 
 def resolve_device(device: str | torch.device) -> torch.device:
@@ -496,6 +499,29 @@ class DigitalTwin:
         return obs
 
     # ------------------------------------------------------------------ interval end
+    def drop_cams(self, mask: torch.Tensor) -> None:
+        """Count the CAMs of the links in ``mask`` [B, L] (bool) as lost in this interval,
+        whatever the radio did: for counterfactual experiments on a copy of the twin
+        (``copy.deepcopy``). Call it after the interval's T subframes, before the vehicles
+        observe and :meth:`finish_interval`."""
+        expected = (self.batch_size, self.num_links)
+        if tuple(mask.shape) != expected or mask.dtype != torch.bool:
+            raise ValueError(
+                f"mask has shape {tuple(mask.shape)} and dtype {mask.dtype}, "
+                f"expected bool {expected}"
+            )
+        if self.subframe != self.subframes_per_interval:
+            raise RuntimeError(
+                f"drop_cams after {self.subframe} of {self.subframes_per_interval} subframes; "
+                "run the whole interval first"
+            )
+        delay = self.link_state.delay_subframes
+        lost = self.subframes_per_interval + 1
+        if self._numpy:
+            self.link_state.delay_subframes = np.where(mask.cpu().numpy(), lost, delay)
+        else:
+            self.link_state.delay_subframes = delay.masked_fill(mask.to(self.device), lost)
+
     def _delivery_subframes(self):
         """CAM delivery subframes [B, L] in the backend's array type."""
         return self.link_state.delay_subframes
@@ -523,15 +549,23 @@ class DigitalTwin:
         delay = torch.as_tensor(self._delivery_subframes(), device=self.device)
         return torch.where(delay <= t - 1, delay, torch.full_like(delay, t))
 
-    def vehicle_observation(self, perfect: bool) -> torch.Tensor:
-        """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5)."""
+    def vehicle_observation(self, perfect: bool, cams_lost: bool = False) -> torch.Tensor:
+        """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5).
+
+        With ``cams_lost`` (impaired observation only): what it would know had this interval's
+        CAM been lost, i.e. the content it held before the interval, at its age, and a command
+        that takes force at the next interval (the counterfactual of a difference IVoI reward,
+        :class:`~vdtn_marl.voi.DeliveryDifferenceIVoI`).
+        """
         platoon = self._native_platoon()
         if perfect:
             return self._public(perfect_observation(platoon, self.params.platoon))
         native = self._native
         switch = self._switch_subframe(perfect=False)
-        usable = switch < self.subframes_per_interval
         lib = xp(switch)
+        if cams_lost:
+            switch = lib.full_like(switch, self.subframes_per_interval)
+        usable = switch < self.subframes_per_interval
         content = lib.where(usable[..., None], native(self.cam_snapshot), native(self.cam_held))
         age_intervals = as_float(native(self.interval)[:, None] - native(self.cam_held_interval))
         age_ms = lib.where(usable, lib.zeros_like(age_intervals), age_intervals * self.interval_ms)
@@ -559,12 +593,19 @@ class DigitalTwin:
             accel = (ahead - v.gather(1, flat)) / self.params.platoon.control_interval_s
         return accel.reshape(intervals.shape)
 
-    def finish_interval(self, commands_mps2: torch.Tensor, perfect: bool) -> IntervalRecord:
+    def finish_interval(
+        self,
+        commands_mps2: torch.Tensor,
+        perfect: bool,
+        command_if_lost_mps2: torch.Tensor | None = None,
+    ) -> IntervalRecord:
         """Integrate the platoon over the interval and pay the control reward.
 
         ``commands_mps2`` [B, F] are the followers' decisions u_k (clipped to the actuator
         bounds). With radio, all T subframes must have run. The twin does not start the next
         interval: call :meth:`begin_interval` (or :meth:`reset` for finished scenarios).
+        ``command_if_lost_mps2`` [B, F] (optional, clipped alike) is only recorded, for IVoI
+        estimators that compare with a lost CAM.
         """
         t = self.subframes_per_interval
         if self.radio_enabled and not perfect and self.subframe != t:
@@ -585,6 +626,15 @@ class DigitalTwin:
         else:
             u = commands_mps2.to(device=self.device, dtype=torch.float32)
         u = clamp(u, pp.accel_min_mps2, pp.accel_max_mps2)
+        if command_if_lost_mps2 is not None:
+            if tuple(command_if_lost_mps2.shape) != expected:
+                raise ValueError(
+                    f"command_if_lost_mps2 has shape {tuple(command_if_lost_mps2.shape)}, "
+                    f"expected {expected}"
+                )
+            command_if_lost_mps2 = torch.as_tensor(
+                command_if_lost_mps2, dtype=torch.float32, device=self.device
+            ).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
         interval = native(self.interval)
         after = self.integrator.integrate(before, self.leader_accel_mps2(interval), u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
@@ -624,6 +674,7 @@ class DigitalTwin:
             truncated=public(interval + 1 >= self.params.episode_intervals),
             cam_delay_subframes=public(delay),
             v2i_rate_bps=public(mean_rate),
+            command_if_lost_mps2=command_if_lost_mps2,
         )
         self.platoon = record.state_after
         self.interval = public(interval + 1)
