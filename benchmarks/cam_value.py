@@ -27,10 +27,14 @@ CAM:
   in the first copy alone, as an environment can; it should match the td credit up to what
   the other followers do in that interval.
 
-Reported per checkpoint: the number of CAMs, each mean with its 95% CI over CAMs, and the
-Pearson correlation between value and td credit. The value is what an RRA agent would have to
-learn from; if the credit at the delivery interval is near zero while the value is positive, the
-value shows up only in later intervals' ξ, after the RRA agent's discount has shrunk it.
+Reported per checkpoint: the number of CAMs, each mean with its 95% CI over CAMs, the
+Pearson correlation between value and td credit, and how persistent delivery is in the acting
+run (the fraction of CAMs in time, and that fraction right after a CAM of the same link that
+was in time and right after one that was not): a comparison of intervals whose CAM was
+delivered with intervals whose CAM was lost compares such runs, not single deliveries. The
+value is what an RRA agent would have to learn from; if the credit at the delivery interval is
+near zero or negative while the value is positive, the value shows up only in later
+intervals' ξ, after the RRA agent's discount has shrunk it.
 Writes ``benchmarks/results/cam_value.json`` atomically. Example (the committed JSON):
 
     python benchmarks/cam_value.py \\
@@ -54,7 +58,7 @@ from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import bind_to_twin
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
-from vdtn_marl.benchmarking import provenance
+from vdtn_marl.benchmarking import checkpoint_run, provenance, table_console
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 from vdtn_marl.voi import mean_ci
@@ -140,6 +144,20 @@ def _pick_one(in_time: torch.Tensor, generator: torch.Generator) -> torch.Tensor
     return chosen.to(in_time.device)
 
 
+def delivery_persistence(in_time: torch.Tensor, alive: torch.Tensor) -> dict[str, float]:
+    """Fraction of CAMs in time overall, after a CAM of the same link in time and after one
+    that was not; ``in_time`` [K, B, L] per interval, ``alive`` [K, B] (only pairs of
+    consecutive intervals in which the scenario was running count)."""
+    counted = alive[:, :, None].expand_as(in_time).double()
+    both = (alive[:-1] & alive[1:])[:, :, None].expand_as(in_time[1:]).double()
+    before, after = in_time[:-1].double(), in_time[1:].double()
+    return {
+        "in_time": float((in_time.double() * counted).sum() / counted.sum()),
+        "after_in_time": float((before * after * both).sum() / (before * both).sum()),
+        "after_miss": float(((1 - before) * after * both).sum() / ((1 - before) * both).sum()),
+    }
+
+
 def _ci(samples: torch.Tensor) -> dict[str, float | int]:
     if samples.numel() < 2:
         return {"mean": float("nan"), "low": float("nan"), "high": float("nan"), "n": 0}
@@ -185,12 +203,15 @@ def measure(
     generator = torch.Generator().manual_seed(seed)
     alive = torch.ones(episodes, dtype=torch.bool, device=twin.device)
     value, td_credit, one_step_credit = [], [], []
+    in_time_history, alive_history = [], []
     last = max(starts)
     steps = track(range(last + 1), description="intervals", disable=not show_progress)
     for k in steps:
         if k > 0:
             main.begin()
         main.run_subframes()
+        in_time_history.append(twin.switch_subframe(perfect=False) < twin.subframes_per_interval)
+        alive_history.append(alive.clone())
         if k in starts:
             kept = main.copy(base_control, base_rra)
             lost = kept.copy(base_control, base_rra)
@@ -224,6 +245,9 @@ def measure(
         "one_step_credit": _ci(one_all),
         "correlation_value_td_credit": _pearson(value_all, td_all),
         "value_sd": float(value_all.std()) if value_all.numel() > 1 else float("nan"),
+        "delivery": delivery_persistence(
+            torch.stack(in_time_history).cpu(), torch.stack(alive_history).cpu()
+        ),
     }
 
 
@@ -233,7 +257,8 @@ def _fmt(stat: dict) -> str:
 
 def print_table(runs: list[dict], console: Console) -> None:
     table = Table(title="What one delivered CAM is worth (platoon return over the horizon)")
-    for column in ("run", "RRA", "CAMs", "value", "td credit", "one-step credit", "corr", "sd"):
+    columns = ("run", "RRA", "CAMs", "value", "td credit", "one-step credit", "corr", "sd")
+    for column in (*columns, "in time (after in time / miss)"):
         table.add_column(column, justify="left" if column in ("run", "RRA") else "right")
     for run in runs:
         row = run["result"]
@@ -246,6 +271,7 @@ def print_table(runs: list[dict], console: Console) -> None:
             _fmt(row["one_step_credit"]),
             f"{row['correlation_value_td_credit']:+.2f}",
             f"{row['value_sd']:.3f}",
+            "{in_time:.2f} ({after_in_time:.2f} / {after_miss:.2f})".format(**row["delivery"]),
         )
     console.print(table)
 
@@ -291,9 +317,7 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--horizon {args.horizon} must be >= 1")
     if args.threads:
         torch.set_num_threads(args.threads)
-    console = Console(emoji=False)
-    if not console.is_terminal:
-        console = Console(width=200, emoji=False)
+    console = table_console(file_width=200)
     began = time.perf_counter()
     runs = []
     scratch = tempfile.TemporaryDirectory(prefix="cam_value_")
@@ -310,11 +334,7 @@ def main(argv: list[str] | None = None) -> int:
         console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
         runs.append(
             {
-                "checkpoint": str(path),
-                "scenario": loop.cfg.scenario.name,
-                "seed": loop.cfg.seed,
-                "rra_reward": loop.cfg.rra.name,
-                "kappa1": loop.cfg.rra.kappa1,
+                **checkpoint_run(path, loop.cfg),
                 "result": measure(
                     loop, args.rra, args.episodes, starts, args.horizon, args.progress
                 ),

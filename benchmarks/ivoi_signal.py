@@ -64,7 +64,7 @@ from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
-from vdtn_marl.benchmarking import parse_names, provenance
+from vdtn_marl.benchmarking import checkpoint_run, parse_names, provenance, table_console
 from vdtn_marl.config import IVOI_ESTIMATORS
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
@@ -369,9 +369,7 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--episodes {args.episodes} must be >= 2 (confidence intervals)")
     if args.threads:
         torch.set_num_threads(args.threads)
-    console = Console(emoji=False)  # estimator specs such as rollout:100:mc stay as typed
-    if not console.is_terminal:  # a log file: wide enough for the table
-        console = Console(width=240, emoji=False)
+    console = table_console(file_width=240)
     began = time.perf_counter()
     runs = []
     scratch = tempfile.TemporaryDirectory(prefix="ivoi_signal_")
@@ -387,11 +385,7 @@ def main(argv: list[str] | None = None) -> int:
             raise SystemExit(f"--reward: {err}") from err
         runs.append(
             {
-                "checkpoint": str(path),
-                "scenario": loop.cfg.scenario.name,
-                "seed": loop.cfg.seed,
-                "rra_reward": loop.cfg.rra.name,
-                "kappa1": loop.cfg.rra.kappa1,
+                **checkpoint_run(path, loop.cfg),
                 "ivoi_scale": loop.cfg.rra.ivoi_scale,
                 "rows": measure(loop, rra_names, estimators, args.episodes, params, args.clip),
             }

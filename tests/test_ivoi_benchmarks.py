@@ -216,6 +216,9 @@ def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, t
     assert data["horizon"] == 1 and result["rra"] == "random"
     assert 0 < result["cams"] <= 16  # at most one dropped CAM per scenario and start
     assert result["value"]["n"] == result["td_credit"]["n"] == result["cams"]
+    delivery = result["delivery"]
+    assert 0 < delivery["in_time"] < 1 and 0 <= delivery["after_miss"] <= 1
+    assert 0 <= delivery["after_in_time"] <= 1
     assert result["td_credit"]["mean"] == pytest.approx(
         result["one_step_credit"]["mean"], abs=0.05 + 0.2 * abs(result["td_credit"]["mean"])
     )
@@ -227,3 +230,14 @@ def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, t
         with pytest.raises(SystemExit, match=message):
             script.main([str(checkpoint), *bad, "--output", str(tmp_path / "x.json")])
     assert not (tmp_path / "x.json").exists()
+
+
+def test_delivery_persistence_counts_consecutive_pairs_of_running_scenarios():
+    persistence = _load("cam_value").delivery_persistence
+    # one scenario, one link: in, in, out, in, out (and a dead scenario that must not count)
+    in_time = torch.tensor([[1, 1], [1, 1], [0, 1], [1, 1], [0, 1]], dtype=torch.bool)[..., None]
+    alive = torch.tensor([[True, False]] * 5)
+    result = persistence(in_time, alive)
+    assert result["in_time"] == pytest.approx(3 / 5)
+    assert result["after_in_time"] == pytest.approx(1 / 3)  # in→in once, in→out twice
+    assert result["after_miss"] == pytest.approx(1.0)  # out→in once

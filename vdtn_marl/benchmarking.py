@@ -1,5 +1,6 @@
 """Helpers shared by the scripts in ``benchmarks/``: comma-separated option lists that fail
-with a message naming the flag and the value, and the provenance block of a results JSON."""
+with a message naming the flag and the value, the provenance block of a results JSON, and
+the description of a measured checkpoint's run."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import platform
 import sys
 
 import torch
+from rich.console import Console
 
 from vdtn_marl import __version__
 from vdtn_marl.runs import script_command
@@ -62,3 +64,23 @@ def provenance(benchmark: str) -> dict[str, str]:
         "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
         "python": sys.version.split()[0],
     }
+
+
+def checkpoint_run(path, cfg) -> dict:
+    """What a results JSON says about a measured checkpoint: its path and its run's scenario,
+    seed, RRA reward and κ1 (``cfg``: the run's :class:`~vdtn_marl.config.RunConfig`)."""
+    return {
+        "checkpoint": str(path),
+        "scenario": cfg.scenario.name,
+        "seed": cfg.seed,
+        "rra_reward": cfg.rra.name,
+        "kappa1": cfg.rra.kappa1,
+    }
+
+
+def table_console(file_width: int) -> Console:
+    """A rich console for result tables: text stays as typed (no ``:name:`` emoji codes, so
+    specs such as ``rollout:100:mc`` survive), and ``file_width`` columns when the output is
+    a file or a pipe rather than a terminal."""
+    console = Console(emoji=False)
+    return console if console.is_terminal else Console(width=file_width, emoji=False)
