@@ -59,6 +59,7 @@ from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import bind_to_twin
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.benchmarking import checkpoint_run, provenance, table_console
+from vdtn_marl.results import pyplot_agg, save_figure
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 from vdtn_marl.voi import mean_ci
@@ -276,6 +277,39 @@ def print_table(runs: list[dict], console: Console) -> None:
     console.print(table)
 
 
+def plot_runs(runs: list[dict], path: Path, note: str) -> Path:
+    """PNG: per run, the value of a CAM (left) and what the IVoI credits it with at its
+    interval (right, td and one-step), each mean with its 95% CI."""
+    plt = pyplot_agg()
+    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 0.45 * len(runs) + 2.2), sharey=True)
+    labels = [f"{r['scenario']} seed {r['seed']}" for r in runs]
+    y = list(range(len(runs)))
+
+    def forest(ax, key, offset, color, label):
+        stats = [r["result"][key] for r in runs]
+        means = [s["mean"] for s in stats]
+        errors = [
+            [s["mean"] - s["low"] for s in stats],
+            [s["high"] - s["mean"] for s in stats],
+        ]
+        ys = [v + offset for v in y]
+        ax.errorbar(means, ys, xerr=errors, fmt="o", color=color, capsize=3, label=label)
+
+    forest(left, "value", 0.0, "tab:blue", "value over the horizon")
+    forest(right, "td_credit", -0.12, "tab:red", "td credit")
+    forest(right, "one_step_credit", 0.12, "tab:orange", "one-step (cam_lost) credit")
+    rra = runs[0]["result"]["rra"]
+    left.set_title(f"What one delivered CAM is worth ({rra} RRA)")
+    right.set_title("What the IVoI credits it with at its interval")
+    for ax in (left, right):
+        ax.axvline(0.0, color="0.5", linewidth=0.8)
+        ax.set_xlabel("control return (reward units)")
+        ax.legend(loc="best", fontsize=8)
+    left.set_yticks(y, labels)
+    left.invert_yaxis()
+    return save_figure(fig, path, note)
+
+
 def _parse_starts(text: str, horizon: int, episode_intervals: int) -> list[int]:
     try:
         starts = sorted({int(part) for part in text.split(",") if part.strip()})
@@ -342,6 +376,12 @@ def main(argv: list[str] | None = None) -> int:
         )
     scratch.cleanup()
     print_table(runs, console)
+    note = (
+        f"benchmarks/cam_value.py --rra {args.rra} --episodes {args.episodes} "
+        f"--starts {args.starts} --horizon {args.horizon}; 95% CIs over CAMs"
+    )
+    plot = plot_runs(runs, args.output.with_suffix(".png"), note)
+    console.print(f"wrote {plot}")
     atomic_write_json(
         args.output,
         {

@@ -212,6 +212,7 @@ def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, t
     args = ["--episodes", "8", "--starts", "4,9", "--horizon", "1", "--no-progress"]
     assert script.main([str(checkpoint), *args, "--output", str(out)]) == 0
     data = json.loads(out.read_text())
+    assert out.with_suffix(".png").read_bytes().startswith(b"\x89PNG")
     result = data["runs"][0]["result"]
     assert data["horizon"] == 1 and result["rra"] == "random"
     assert 0 < result["cams"] <= 16  # at most one dropped CAM per scenario and start

@@ -239,7 +239,7 @@ def plot_kappa1_pareto(
     ax.set_title(title)
     ax.grid(True, alpha=0.3)
     ax.legend(loc="best", fontsize=8)
-    return _save_figure(fig, Path(path), note)
+    return save_figure(fig, Path(path), note)
 
 
 def summarize_sweep(
@@ -380,7 +380,9 @@ ERROR_TRACES_FILE = "error_traces.png"
 LATENCY_CDF_FILE = "cam_latency_cdf.png"
 
 
-def _save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
+def save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
+    """Write ``fig`` as a PNG atomically (``note``: small grey text at the bottom right, e.g.
+    the command) and close it."""
     import matplotlib.pyplot as plt
 
     fig.tight_layout()
@@ -393,7 +395,8 @@ def _save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
     return atomic_write_bytes(path, buffer.getvalue())
 
 
-def _pyplot():
+def pyplot_agg():
+    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -424,7 +427,7 @@ def plot_training_curves(
     import numpy as np
     import pandas as pd
 
-    plt = _pyplot()
+    plt = pyplot_agg()
     if isinstance(metrics_csv, Mapping):
         groups = {label: [pd.read_csv(f) for f in files] for label, files in metrics_csv.items()}
     else:
@@ -467,7 +470,7 @@ def plot_training_curves(
         fig.tight_layout(rect=(0, 0, 1, 0.9))
     if title:
         fig.suptitle(title, fontsize=10, y=0.02, va="bottom")
-    return _save_figure(fig, Path(path), note)
+    return save_figure(fig, Path(path), note)
 
 
 def plot_error_traces(
@@ -479,7 +482,7 @@ def plot_error_traces(
 ) -> Path:
     """|gap error| (m) and |speed error| (m/s) of every follower over one evaluation scenario;
     inputs [K, F] (intervals × followers)."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     import numpy as np
 
     gap = np.asarray(gap_error_m)
@@ -491,7 +494,7 @@ def plot_error_traces(
         bottom.plot(time_s, speed[:, follower], linewidth=1)
     top.legend(fontsize=8, ncol=min(gap.shape[1], 4))
     _label_error_axes(top, bottom, title)
-    return _save_figure(fig, Path(path))
+    return save_figure(fig, Path(path))
 
 
 def _label_error_axes(top: Any, bottom: Any, title: str, what: str = "") -> None:
@@ -513,7 +516,7 @@ def plot_error_trace_comparison(
     """|gap error| (m) and |speed error| (m/s) over one evaluation scenario for several methods
     (``{label: (gap [K, F], speed [K, F])}``, same scenario and seed): the mean over followers
     as a line, shaded between the followers' minimum and maximum."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     import numpy as np
 
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.2), dpi=120, sharex=True)
@@ -526,7 +529,7 @@ def plot_error_trace_comparison(
                                 color=line.get_color(), alpha=0.15, linewidth=0)  # fmt: skip
     top.legend(fontsize=8, title="line: mean over followers; band: min–max", title_fontsize=7)
     _label_error_axes(top, bottom, title)
-    return _save_figure(fig, Path(path), note)
+    return save_figure(fig, Path(path), note)
 
 
 def plot_latency_cdf(
@@ -538,7 +541,7 @@ def plot_latency_cdf(
 ) -> Path:
     """Empirical CDF of delivered CAMs' latency (ms) per method; the interval deadline marked.
     A method that delivered no CAM has no curve (its label says so in the legend)."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     import numpy as np
 
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
@@ -556,7 +559,7 @@ def plot_latency_cdf(
     ax.legend(fontsize=8)
     if title:
         ax.set_title(title, fontsize=10)
-    return _save_figure(fig, Path(path), note)
+    return save_figure(fig, Path(path), note)
 
 
 def plot_metric_bars(
@@ -569,7 +572,7 @@ def plot_metric_bars(
     """One bar per method: its mean with the confidence interval as error bar, and each run
     (seed) as a dot. ``rows``: ``{"label", "mean", "ci_low", "ci_high", "values"}`` each; a
     row without a finite mean is drawn as an empty slot labelled "n/a"."""
-    plt = _pyplot()
+    plt = pyplot_agg()
     import numpy as np
 
     labels = [str(r["label"]) for r in rows]
@@ -597,4 +600,4 @@ def plot_metric_bars(
     ax.grid(True, axis="y", alpha=0.3)
     if title:
         ax.set_title(title, fontsize=10)
-    return _save_figure(fig, Path(path), note)
+    return save_figure(fig, Path(path), note)
