@@ -45,7 +45,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import tempfile
 import time
 from pathlib import Path
 
@@ -55,14 +54,19 @@ from rich.progress import track
 from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
-from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import bind_to_twin
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
-from vdtn_marl.benchmarking import checkpoint_run, provenance, table_console
+from vdtn_marl.benchmarking import (
+    checkpoint_run,
+    ci_summary,
+    loaded_checkpoints,
+    provenance,
+    table_console,
+)
 from vdtn_marl.results import pyplot_agg, save_figure
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
-from vdtn_marl.voi import mean_ci
+from vdtn_marl.voi import close_interval
 
 RESULTS = Path("benchmarks/results/cam_value.json")
 LEARNED = "learned"
@@ -99,18 +103,14 @@ class ActingSystem:
         for _ in range(twin.subframes_per_interval):
             twin.step_subframe(torch.as_tensor(self.rra(twin.rra_observation())).long())
 
-    def _observe(self, cams_lost: bool = False) -> torch.Tensor:
+    def _decide(self, cams_lost: bool) -> torch.Tensor:
         observation = self.twin.vehicle_observation(False, cams_lost=cams_lost)
-        return self.completion.complete(observation, self.twin.interval)
+        return self.control(self.completion.complete(observation, self.twin.interval))
 
-    def finish(self, counterfactual: bool = False) -> IntervalRecord:
-        """Decide and integrate the interval. ``counterfactual`` also records the command a
-        lost CAM would have led to (before the actual one, so that a stateful completer ends
-        on the actual CAMs)."""
-        command_if_lost = self.control(self._observe(cams_lost=True)) if counterfactual else None
-        return self.twin.finish_interval(
-            self.control(self._observe()), False, command_if_lost_mps2=command_if_lost
-        )
+    def finish(self, estimator=None) -> IntervalRecord:
+        """Decide and integrate the interval, recording what ``estimator`` needs (the command
+        a lost CAM would have led to, for the ``cam_lost`` baseline)."""
+        return close_interval(self.twin, estimator, self._decide)
 
     def begin(self) -> None:
         self.twin.begin_interval()
@@ -157,13 +157,6 @@ def delivery_persistence(in_time: torch.Tensor, alive: torch.Tensor) -> dict[str
         "after_in_time": float((before * after * both).sum() / (before * both).sum()),
         "after_miss": float(((1 - before) * after * both).sum() / ((1 - before) * both).sum()),
     }
-
-
-def _ci(samples: torch.Tensor) -> dict[str, float | int]:
-    if samples.numel() < 2:
-        return {"mean": float("nan"), "low": float("nan"), "high": float("nan"), "n": 0}
-    mean, low, high = mean_ci(samples)
-    return {"mean": mean, "low": low, "high": high, "n": int(samples.numel())}
 
 
 def _pearson(x: torch.Tensor, y: torch.Tensor) -> float:
@@ -219,7 +212,7 @@ def measure(
             in_time = twin.switch_subframe(perfect=False) < twin.subframes_per_interval
             drop = _pick_one(in_time & alive[:, None], generator)
             lost.twin.drop_cams(drop)
-            record_kept = kept.finish(counterfactual=True)
+            record_kept = kept.finish(one_step)
             record_lost = lost.finish()
             td_kept = td(kept.twin, record_kept)
             td_lost = td(lost.twin, record_lost)
@@ -241,9 +234,9 @@ def measure(
     return {
         "rra": f"{cfg.rra.name} ({LEARNED})" if rra_name == LEARNED else rra_name,
         "cams": int(value_all.numel()),
-        "value": _ci(value_all),
-        "td_credit": _ci(td_all),
-        "one_step_credit": _ci(one_all),
+        "value": ci_summary(value_all),
+        "td_credit": ci_summary(td_all),
+        "one_step_credit": ci_summary(one_all),
         "correlation_value_td_credit": _pearson(value_all, td_all),
         "value_sd": float(value_all.std()) if value_all.numel() > 1 else float("nan"),
         "delivery": delivery_persistence(
@@ -354,18 +347,10 @@ def main(argv: list[str] | None = None) -> int:
     console = table_console(file_width=200)
     began = time.perf_counter()
     runs = []
-    scratch = tempfile.TemporaryDirectory(prefix="cam_value_")
-    for number, path in enumerate(args.checkpoints):
-        try:
-            loop = JointOptimisation.from_checkpoint(
-                path, Path(scratch.name) / f"run{number}", needs_pi_tilde=True
-            )
-        except CheckpointError as err:
-            raise SystemExit(str(err)) from err
+    for path, loop in loaded_checkpoints(args.checkpoints, "cam_value_", console):
         if args.rra == LEARNED and not loop.cfg.rra.learned:
             raise SystemExit(f"--rra {LEARNED}: {path} learned no RRA policy")
         starts = _parse_starts(args.starts, args.horizon, loop.params.episode_intervals)
-        console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
         runs.append(
             {
                 **checkpoint_run(path, loop.cfg),
@@ -374,7 +359,6 @@ def main(argv: list[str] | None = None) -> int:
                 ),
             }
         )
-    scratch.cleanup()
     print_table(runs, console)
     note = (
         f"benchmarks/cam_value.py --rra {args.rra} --episodes {args.episodes} "

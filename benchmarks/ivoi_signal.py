@@ -51,7 +51,6 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import tempfile
 import time
 from pathlib import Path
 
@@ -60,15 +59,21 @@ from rich.console import Console
 from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
-from vdtn_marl.algos.checkpoint import CheckpointError
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
-from vdtn_marl.benchmarking import checkpoint_run, parse_names, provenance, table_console
+from vdtn_marl.benchmarking import (
+    checkpoint_run,
+    ci_summary,
+    loaded_checkpoints,
+    parse_names,
+    provenance,
+    table_console,
+)
 from vdtn_marl.config import IVOI_ESTIMATORS
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
-from vdtn_marl.voi import expected_voi, mean_ci
+from vdtn_marl.voi import expected_voi
 
 RESULTS = Path("benchmarks/results/ivoi_signal.json")
 LEARNED = "learned"
@@ -87,15 +92,6 @@ def _reward_overrides(items: list[str]) -> dict[str, float]:
         except ValueError:
             raise SystemExit(f"--reward {item!r}: {value!r} is not a number") from None
     return overrides
-
-
-def _ci(samples: torch.Tensor) -> dict[str, float | int]:
-    """Mean with its 95% CI over the finite per-scenario samples."""
-    finite = samples[torch.isfinite(samples)]
-    if finite.numel() == 0:
-        return {"mean": float("nan"), "low": float("nan"), "high": float("nan"), "n": 0}
-    mean, low, high = mean_ci(finite)
-    return {"mean": mean, "low": low, "high": high, "n": int(finite.numel())}
 
 
 def parse_estimators(text: str) -> list[str]:
@@ -153,11 +149,6 @@ class ClippedIVoI:
         return self.estimator(twin, record).clamp(-self.clip, self.clip)
 
 
-def load_run(path: Path, scratch: Path) -> JointOptimisation:
-    """The JOCC loop of a checkpoint with π̃ (:meth:`JointOptimisation.from_checkpoint`)."""
-    return JointOptimisation.from_checkpoint(path, scratch, needs_pi_tilde=True)
-
-
 def measure(
     loop: JointOptimisation,
     rra_names: list[str],
@@ -209,10 +200,12 @@ def measure(
                     "collision_rate": m["collision_rate"],
                     "control_cost": m["control_cost"],
                     "evoi": {"mean": evoi, "low": low, "high": high, "n": episodes},
-                    "ivoi_sum": _ci(acting.ivoi_sums.double()),
-                    "ivoi_delivered": _ci(acting.ivoi_delivered),
-                    "ivoi_lost": _ci(acting.ivoi_lost),
-                    "ivoi_delivered_minus_lost": _ci(acting.ivoi_delivered - acting.ivoi_lost),
+                    "ivoi_sum": ci_summary(acting.ivoi_sums.double()),
+                    "ivoi_delivered": ci_summary(acting.ivoi_delivered),
+                    "ivoi_lost": ci_summary(acting.ivoi_lost),
+                    "ivoi_delivered_minus_lost": ci_summary(
+                        acting.ivoi_delivered - acting.ivoi_lost
+                    ),
                     "ivoi_std": m["ivoi_std"],
                     "seconds": time.perf_counter() - began,
                 }
@@ -372,13 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     console = table_console(file_width=240)
     began = time.perf_counter()
     runs = []
-    scratch = tempfile.TemporaryDirectory(prefix="ivoi_signal_")
-    for number, path in enumerate(args.checkpoints):
-        try:
-            loop = load_run(path, Path(scratch.name) / f"run{number}")
-        except CheckpointError as err:
-            raise SystemExit(str(err)) from err
-        console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
+    for path, loop in loaded_checkpoints(args.checkpoints, "ivoi_signal_", console):
         try:
             params = TwinParams.from_overrides(**loop.cfg.scenario.model_kwargs(), **reward)
         except ConfigError as err:
@@ -390,7 +377,6 @@ def main(argv: list[str] | None = None) -> int:
                 "rows": measure(loop, rra_names, estimators, args.episodes, params, args.clip),
             }
         )
-    scratch.cleanup()
     if reward:
         console.print(f"evaluated with control-reward overrides {reward}")
     if args.clip is not None:

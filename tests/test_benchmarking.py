@@ -1,8 +1,19 @@
-"""Option parsing and provenance shared by the benchmark scripts."""
+"""Option parsing, provenance and summaries shared by the benchmark scripts."""
+
+import math
 
 import pytest
+import torch
 
-from vdtn_marl.benchmarking import parse_names, parse_numbers, parse_seeds, provenance
+from vdtn_marl.benchmarking import (
+    checkpoint_run,
+    ci_summary,
+    parse_names,
+    parse_numbers,
+    parse_seeds,
+    provenance,
+)
+from vdtn_marl.config import RunConfig
 
 
 def test_parse_names():
@@ -35,3 +46,21 @@ def test_provenance_names_the_command_without_the_interpreter_path():
     assert block["benchmark"] == "demo"
     assert block["command"].startswith("python ")
     assert {"vdtn_marl", "torch", "written", "machine", "python"} <= block.keys()
+
+
+def test_ci_summary_counts_only_finite_samples():
+    summary = ci_summary(torch.tensor([1.0, float("nan"), 3.0, float("inf")]))
+    assert summary["n"] == 2 and summary["mean"] == pytest.approx(2.0)
+    assert summary["low"] < 2.0 < summary["high"]
+    one = ci_summary(torch.tensor([5.0]))
+    assert one["n"] == 1 and one["mean"] == 5.0 and math.isnan(one["low"])
+    empty = ci_summary(torch.tensor([float("nan")]))
+    assert empty["n"] == 0 and math.isnan(empty["mean"])
+
+
+def test_checkpoint_run_names_the_run():
+    described = checkpoint_run("runs/x/last.pt", RunConfig(seed=4))
+    assert described == {
+        "checkpoint": "runs/x/last.pt", "scenario": "platoon4", "seed": 4,
+        "rra_reward": "jocc", "kappa1": 0.5,
+    }  # fmt: skip

@@ -160,7 +160,7 @@ def test_estimator_specs_pick_horizon_and_bootstrap(checkpoint, tmp_path):
     for bad in (*bad_specs, "paired", "td:lost"):
         with pytest.raises(SystemExit, match="must list some of td, rollout"):
             script.parse_estimators(bad)
-    loop = script.load_run(checkpoint, tmp_path / "scratch")
+    loop = JointOptimisation.from_checkpoint(checkpoint, tmp_path / "scratch")
     default = script.make_estimator(loop, "rollout")  # the run's rra.rollout_* (10, bootstrap)
     assert default.horizon_intervals == 10 and default.terminal_value is not None
     short = script.make_estimator(loop, "rollout:1")

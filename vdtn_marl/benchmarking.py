@@ -1,18 +1,21 @@
 """Helpers shared by the scripts in ``benchmarks/``: comma-separated option lists that fail
-with a message naming the flag and the value, the provenance block of a results JSON, and
-the description of a measured checkpoint's run."""
+with a message naming the flag and the value, the provenance block of a results JSON, means
+with their CIs, and the description of a measured checkpoint's run."""
 
 from __future__ import annotations
 
 import datetime as dt
 import platform
 import sys
+import tempfile
+from pathlib import Path
 
 import torch
 from rich.console import Console
 
 from vdtn_marl import __version__
 from vdtn_marl.runs import script_command
+from vdtn_marl.voi import mean_ci
 
 
 def _parts(text: str) -> list[str]:
@@ -64,6 +67,37 @@ def provenance(benchmark: str) -> dict[str, str]:
         "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
         "python": sys.version.split()[0],
     }
+
+
+def ci_summary(samples: torch.Tensor) -> dict[str, float | int]:
+    """Mean with its 95% Student-t CI over the finite samples, as a results JSON stores it
+    (``n``: how many samples counted; NaNs where there are too few)."""
+    finite = torch.as_tensor(samples, dtype=torch.float64).reshape(-1)
+    finite = finite[torch.isfinite(finite)]
+    if finite.numel() == 0:
+        return {"mean": float("nan"), "low": float("nan"), "high": float("nan"), "n": 0}
+    mean, low, high = mean_ci(finite)
+    return {"mean": mean, "low": low, "high": high, "n": int(finite.numel())}
+
+
+def loaded_checkpoints(paths, scratch_prefix: str, console=None):
+    """Yield (path, JOCC loop with every trainer loaded) per checkpoint, one after the other;
+    the loops write to a scratch directory removed at the end (nothing lands next to the
+    checkpoints). A bad checkpoint stops the script with its error."""
+    from vdtn_marl.algos.checkpoint import CheckpointError
+    from vdtn_marl.algos.jocc import JointOptimisation
+
+    with tempfile.TemporaryDirectory(prefix=scratch_prefix) as scratch:
+        for number, path in enumerate(paths):
+            try:
+                loop = JointOptimisation.from_checkpoint(
+                    path, Path(scratch) / f"run{number}", needs_pi_tilde=True
+                )
+            except CheckpointError as err:
+                raise SystemExit(str(err)) from err
+            if console is not None:
+                console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
+            yield path, loop
 
 
 def checkpoint_run(path, cfg) -> dict:

@@ -224,15 +224,8 @@ class JointOptimisation:
         except (KeyError, TypeError) as err:
             raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
         task = payload.get("task")
-        if (
-            needs_pi_tilde
-            and cfg.control.name == "learned"
-            and task
-            not in (
-                "jocc",
-                "control_impaired",
-            )
-        ):
+        trains_pi_tilde = task in ("jocc", "control_impaired")
+        if needs_pi_tilde and cfg.control.name == "learned" and not trains_pi_tilde:
             raise CheckpointError(
                 f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
                 "use a checkpoint of a jocc or control_impaired run"

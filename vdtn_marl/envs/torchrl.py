@@ -347,9 +347,7 @@ class VDTNTorchRLEnv(EnvBase):
         rra = RandomRRAPolicy(self.num_actions, draw[1])
         for _ in range(intervals):
             self._run_radio(policy=rra)
-            record = twin.finish_interval(
-                self.control_module(self._impaired_vehicle_obs()), perfect=False
-            )
+            record = twin.finish_interval(self._control_module_commands(False), perfect=False)
             collided = record.collided.any(-1)
             if bool(collided.any()):
                 if not bool(collided.all()):

@@ -555,7 +555,7 @@ class DigitalTwin:
         With ``cams_lost`` (impaired observation only): what it would know had this interval's
         CAM been lost, i.e. the content it held before the interval, at its age, and a command
         that takes force at the next interval (the counterfactual of a difference IVoI reward,
-        :class:`~vdtn_marl.voi.DeliveryDifferenceIVoI`).
+        the ``cam_lost`` baseline of :class:`~vdtn_marl.voi.RolloutIVoIEstimator`).
         """
         platoon = self._native_platoon()
         if perfect:
