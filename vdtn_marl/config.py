@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
-from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
 
 ALGOS = ("mappo", "ippo")
@@ -229,7 +229,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("rra.kappa1", r.kappa1, 0.0, 1.0)
     if r.kappa2 is not None:
         _real("rra.kappa2", r.kappa2, 0.0, 1.0)
-        if abs(r.kappa1 + r.kappa2 - 1.0) > 1e-6:
+        if abs(r.kappa1 + r.kappa2 - 1.0) > KAPPA_SUM_ABS_TOL:
             raise ConfigError(
                 f"rra.kappa1={r.kappa1!r} + rra.kappa2={r.kappa2!r} must sum to 1 "
                 "(leave rra.kappa2 unset to derive it as 1 − κ1)"

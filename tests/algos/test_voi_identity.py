@@ -171,3 +171,16 @@ def test_a_collision_ends_a_rollout_as_it_ends_the_episode(backend):
     assert float(one[0].sum()) < pp.collision_penalty / 2  # the penalty is in interval 1
     torch.testing.assert_close(five[0], one[0])  # ... and nothing after it
     assert not torch.equal(five[1], one[1])
+
+
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
+def test_evaluation_with_radio_and_ivoi_runs_on_cuda():
+    params = TwinParams.from_overrides(episode_intervals=4)
+    cacc = CACCController(params.platoon)
+    estimator = TDIVoIEstimator(RolloutValue(cacc, horizon_intervals=4, discount=GAMMA), GAMMA)
+    result = evaluate_system(
+        params, cacc, None, perfect=False, episodes=8, intervals=4, seed=0, gamma=GAMMA,
+        device="cuda", ivoi_estimator=estimator,
+    )  # fmt: skip
+    for key in ("control_cost", "cam_delivery_rate", "cam_latency_ms_p50", "ivoi_std"):
+        assert key in result.metrics and result.metrics[key] == result.metrics[key], key

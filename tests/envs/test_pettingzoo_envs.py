@@ -267,3 +267,22 @@ def test_drra_reward_pays_progress_and_miss_penalty():
         _, rewards, *_ = env.step(actions)
         expected = -2.0 if step == T - 1 else 0.0
         assert all(math.isclose(rewards[a], expected, abs_tol=1e-6) for a in env.rra_agents)
+
+
+@pytest.mark.parametrize("kappa2, accepted", [(0.7000005, True), (0.701, False)])
+def test_config_and_environment_accept_the_same_kappa_sums(kappa2, accepted):
+    """κ1 + κ2 = 1 up to one shared tolerance: a pair the config accepts builds the env."""
+    from dataclasses import replace
+
+    from vdtn_marl.config import RunConfig, validate
+
+    cfg = RunConfig()
+    cfg = replace(cfg, rra=replace(cfg.rra, kappa1=0.3, kappa2=kappa2))
+    if accepted:
+        validate(cfg)
+        TwoTimescaleEnv(kappa1=0.3, kappa2=kappa2)
+    else:
+        with pytest.raises(ConfigError, match="sum to 1"):
+            validate(cfg)
+        with pytest.raises(ConfigError, match="must equal 1"):
+            TwoTimescaleEnv(kappa1=0.3, kappa2=kappa2)

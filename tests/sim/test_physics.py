@@ -311,3 +311,15 @@ def test_masked_subframe_advances_only_masked_scenarios():
     assert torch.equal(twin.link_state.remaining_bits[1], bits_before[1])
     assert (twin._v2i_rate_sum[0] > rate_before[0]).all()
     assert torch.equal(twin._v2i_rate_sum[1], rate_before[1])
+
+
+def test_symmetric_shadowing_draws_have_unit_variance_on_and_off_the_diagonal():
+    """Reciprocal V2V shadowing: X[i, j] = X[j, i], every entry N(0, 1) (the diagonal is the
+    vehicle-to-itself path a V2I user's receiver sees, docs/model.md §4.2-4.3)."""
+    g = torch.Generator().manual_seed(0)
+    x = channel.symmetric_normal((40_000, 4, 4), g)
+    torch.testing.assert_close(x, x.transpose(-1, -2), rtol=0, atol=0)
+    variance = x.var(0)
+    assert ((variance - 1.0).abs() < 0.05).all(), variance
+    g = torch.Generator().manual_seed(0)
+    np.testing.assert_array_equal(channel.symmetric_normal((40_000, 4, 4), g, numpy=True), x)

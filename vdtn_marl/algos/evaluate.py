@@ -230,7 +230,7 @@ def evaluate_system(
     if radio:
         metrics["cam_delivery_rate"] = float(cams_delivered / cams_sent)
         if latency.numel():
-            q = torch.quantile(latency, torch.tensor([0.5, 0.95], dtype=torch.float64))
+            q = torch.quantile(latency, latency.new_tensor([0.5, 0.95]))
             metrics["cam_latency_ms_mean"] = float(latency.mean())
             metrics["cam_latency_ms_p50"] = float(q[0])
             metrics["cam_latency_ms_p95"] = float(q[1])

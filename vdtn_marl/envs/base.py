@@ -7,7 +7,6 @@ The environments are thin: they translate between PettingZoo's dicts and the twi
 from __future__ import annotations
 
 import functools
-import math
 
 import gymnasium
 import numpy as np
@@ -16,7 +15,7 @@ from pettingzoo import ParallelEnv
 
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.sim.link import RRA_OBS_GAIN_CLIP
-from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
 from vdtn_marl.sim.twin import RRA_CONTROL_CLIP, DigitalTwin, IntervalRecord
 
@@ -69,7 +68,7 @@ def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
         kappa2 = 1.0 - kappa1
     if not (isinstance(kappa2, int | float) and 0.0 <= kappa2 <= 1.0):
         raise ConfigError(f"kappa2={kappa2!r} is outside the allowed range [0, 1]")
-    if not math.isclose(kappa1 + kappa2, 1.0, abs_tol=1e-9):
+    if abs(kappa1 + kappa2 - 1.0) > KAPPA_SUM_ABS_TOL:
         raise ConfigError(
             f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})"
         )

@@ -136,8 +136,10 @@ class PlatoonControlEnv(VDTNParallelEnv):
         for _ in range(twin.subframes_per_interval):
             twin.step_subframe(self.rra_policy(twin.rra_observation()))
 
-    def _observations(self) -> dict[str, np.ndarray]:
-        obs = self.twin.vehicle_observation(perfect=not self.impaired)
+    def _observations(self, cams_lost: bool = False) -> dict[str, np.ndarray]:
+        """Each follower's observation; ``cams_lost`` (impaired, at an episode's end): what it
+        knows at the next decision time before that interval's CAM arrives."""
+        obs = self.twin.vehicle_observation(perfect=not self.impaired, cams_lost=cams_lost)
         if self.impaired:
             obs = self.completion.complete(obs, self.twin.interval)
         obs = obs[0].cpu().numpy()
@@ -161,8 +163,9 @@ class PlatoonControlEnv(VDTNParallelEnv):
         rewards = record.reward[0].tolist()
         names = self.agents
         infos = interval_infos(record, names, self.twin.interval_ms, self.twin.subframe_ms)
-        obs = self._observations()
-        self.agents = [] if (terminated or truncated) else names
+        finished = terminated or truncated
+        obs = self._observations(cams_lost=finished and self.impaired)
+        self.agents = [] if finished else names
         return (
             obs,
             {n: rewards[i] for i, n in enumerate(names)},

@@ -483,7 +483,8 @@ class VDTNTorchRLEnv(EnvBase):
         all_going = bool(going.all())
         final_obs = None
         if self.impaired and not all_going:
-            final_obs = self._impaired_vehicle_obs()  # what finished scenarios saw last
+            # what finished scenarios know at the next decision time, before its CAM arrives
+            final_obs = self._impaired_vehicle_obs(~going, cams_lost=True)
         if all_going:
             twin.begin_interval()
             if self.impaired:
@@ -529,6 +530,11 @@ class VDTNTorchRLEnv(EnvBase):
                 twin.begin_interval()
             else:
                 final_rra_obs = twin.rra_observation().clone()
+                if self.has_vehicles:
+                    final_vehicle_obs = self._impaired_vehicle_obs(~going, cams_lost=True)
+                    self._vehicle_obs = torch.where(
+                        going[:, None, None], self._vehicle_obs, final_vehicle_obs
+                    )
                 if bool(going.any()):
                     twin.begin_interval(going)
         vehicle_obs = None

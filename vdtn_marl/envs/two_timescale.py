@@ -149,9 +149,9 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         self._last_closing = dict.fromkeys(self.vehicle_agents, INITIAL_INTERVAL_INFO)
         return self._observations(), self._infos(closing=None, ivoi=None, throughput_mbps=0.0)
 
-    def _refresh_vehicle_obs(self) -> None:
+    def _refresh_vehicle_obs(self, cams_lost: bool = False) -> None:
         if self.vehicles_are_agents:
-            obs = self._completed_vehicle_observation()[0].cpu().numpy()
+            obs = self._completed_vehicle_observation(cams_lost)[0].cpu().numpy()
             self._vehicle_obs = {name: obs[i] for i, name in enumerate(self.vehicle_agents)}
 
     def _completed_vehicle_observation(self, cams_lost: bool = False) -> torch.Tensor:
@@ -232,6 +232,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             truncated = bool(record.truncated[0]) and not terminated
             if not (terminated or truncated):
                 twin.begin_interval()
+            else:  # what the followers know at the next decision time, before its CAM arrives
+                self._refresh_vehicle_obs(cams_lost=True)
         if self._vehicle_tick_next():
             self._refresh_vehicle_obs()
 

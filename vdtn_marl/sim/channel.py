@@ -70,12 +70,17 @@ def symmetric_normal(
 ) -> torch.Tensor | np.ndarray:
     """Standard normal [..., N, N] with X[i, j] = X[j, i] (reciprocal links), unit variance.
 
-    ``numpy=True``: the same draws and numbers as a NumPy array (CPU generator).
+    Off the diagonal X[i, j] = (x[i, j] + x[j, i])/√2; on it X[i, i] = x[i, i] (the symmetric
+    sum would have variance 2 there). ``numpy=True``: the same draws and numbers as a NumPy
+    array (CPU generator).
     """
     x = torch.randn(shape, generator=generator, device=generator.device)
     if numpy:
         x = x.numpy()
-    return (x + x.swapaxes(-1, -2)) * (0.5**0.5)
+        diagonal = np.eye(shape[-1], dtype=bool)
+        return np.where(diagonal, x, (x + x.swapaxes(-1, -2)) * (0.5**0.5))
+    diagonal = torch.eye(shape[-1], dtype=torch.bool, device=x.device)
+    return torch.where(diagonal, x, (x + x.transpose(-1, -2)) * (0.5**0.5))
 
 
 def shadowing_update_db(

@@ -15,6 +15,11 @@ class ConfigError(ValueError):
     """A parameter value outside its allowed range; the message names key, value and range."""
 
 
+KAPPA_SUM_ABS_TOL = 1e-6
+"""How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
+config validation and the environments."""
+
+
 def _check_range(name: str, value: float, low: float, high: float, *, low_open=False) -> None:
     bad = value != value or value > high or (value <= low if low_open else value < low)
     if bad:
