@@ -49,7 +49,14 @@ from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
-from vdtn_marl.config import IVOI_ESTIMATORS, RunConfig, from_dict, to_dict, validate
+from vdtn_marl.config import (
+    IVOI_ESTIMATORS,
+    RunConfig,
+    from_dict,
+    to_dict,
+    validate,
+    validate_device,
+)
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
@@ -94,14 +101,16 @@ class SwitchablePolicy:
             self.policy.seed(seed)
 
 
-def trace_source(cfg: RunConfig, part: str) -> str | TraceSource:
-    """The scenario's leader traces; a user's file is split into train/eval parts."""
+def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]:
+    """The scenario's leader traces for training and for evaluation: a named trace set for
+    both, or a user's file divided into a train and an eval part
+    (:func:`~vdtn_marl.data.selection.file_sources`)."""
     scenario = cfg.scenario
     if scenario.trace_path is None:
-        return scenario.traces
-    from vdtn_marl.data.profiles import load_trace_source
+        return scenario.traces, scenario.traces
+    from vdtn_marl.data.selection import file_sources
 
-    return load_trace_source(scenario.traces, scenario.trace_path, part=part)
+    return file_sources(scenario.traces, scenario.trace_path)
 
 
 class JointOptimisation:
@@ -125,11 +134,10 @@ class JointOptimisation:
         self.control_learned = control.name == "learned"
         self.rra_learned = rra.learned
         self.gamma = algo.gamma
-        self.train_traces = train_traces = trace_source(cfg, "train")
-        self.eval_traces = trace_source(cfg, "eval")
+        self.train_traces, self.eval_traces = trace_sources(cfg)
         env_kw: dict[str, Any] = dict(
             batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
-            trace_source=train_traces, **cfg.scenario.model_kwargs(),
+            trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
         )  # fmt: skip
         cacc = CACCController(self.params.platoon)
 
@@ -574,6 +582,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
     cfg.rra.kappa1 = args.kappa1
+    try:
+        validate(cfg)
+        validate_device(cfg.device)
+    except ConfigError as exc:
+        parser.error(str(exc))
     summary = JointOptimisation(cfg, args.run_dir).run()
     print(format_table(summary))
     print(f"outputs: {Path(args.run_dir).resolve()}")
