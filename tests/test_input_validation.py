@@ -49,19 +49,15 @@ def test_a_single_vehicle_csv_is_split_in_time(tmp_path):
     assert run_eval.profiles[0].duration_s == p_eval.duration_s
 
 
-def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(tmp_path):
+def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch):
     # us101/2 is an eval vehicle and us101/7 a training one (tests/data/test_data_profiles.py)
     from vdtn_marl.data import profiles as profiles_module
     from vdtn_marl.data.loaders import SpeedProfile
 
     t = np.arange(0.0, 60.0, 0.1)
     fake = [SpeedProfile(t, 20.0 + 0 * t, vid, "fake") for vid in ("us101/2", "us101/7")]
-    original = profiles_module.load_profiles
-    profiles_module.load_profiles = lambda *a, **k: list(fake)
-    try:
-        train, evaluation = load_train_eval_sources("csv", "unused.csv")
-    finally:
-        profiles_module.load_profiles = original
+    monkeypatch.setattr(profiles_module, "load_profiles", lambda *a, **k: list(fake))
+    train, evaluation = load_train_eval_sources("csv", "unused.csv")
     assert [p.vehicle_id for p in train.profiles] == ["us101/7"]
     assert [p.vehicle_id for p in evaluation.profiles] == ["us101/2"]
 
