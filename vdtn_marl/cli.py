@@ -10,30 +10,37 @@ registry; ``rollout`` forwards to :mod:`vdtn_marl.rollout`.
 How a Hydra command runs:
 
 1. The command word is taken out of the arguments; Hydra's own argument parser reads the rest.
-2. Pre-pass: every job's config is composed with Hydra's compose API (for ``-m``, one per
+2. ``eval checkpoint=RUN``: the overrides that recompose the config of the checkpoint's run
+   go before the user's (:func:`eval_overrides`), so eval uses the run's config and the
+   command line changes it.
+3. Pre-pass: every job's config is composed with Hydra's compose API (for ``-m``, one per
    combination of the sweep, expanded as Hydra's basic sweeper does), converted to a
    :class:`RunConfig`, and checked by :func:`vdtn_marl.config.validate` and
-   :func:`vdtn_marl.config.validate_device`. A bad config prints one line,
+   :func:`vdtn_marl.config.validate_device`; the job's folder must not hold a run unless
+   ``resume=true`` continues it. A bad config prints one line,
    ``error: KEY=VALUE ... allowed ...``, and exits with code 2 before anything is written.
-3. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
+4. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
    ``--cfg``, ``--info`` behave as in any Hydra app). Each job writes ``config.yaml`` (the
    resolved config) to its run directory and calls the entry point, which writes
-   ``metrics.csv``, ``checkpoints/`` and ``summary.json`` there.
+   ``metrics.csv``, ``checkpoints/`` and ``summary.json`` there, and logs its stages to
+   ``<command>.log``. Ctrl-C prints the command that continues the run and exits with 130.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib
 import importlib.util
 import json
+import logging
 import os
 import re
 import sys
 import textwrap
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -46,6 +53,7 @@ from vdtn_marl.registry import EnvSpec, list_envs, spec
 PROG = "vdtn-marl"
 CONFIG_PACKAGE = "vdtn_marl.conf"
 EXIT_CONFIG_ERROR = 2
+EXIT_INTERRUPTED = 130  # the shell's code for Ctrl-C (128 + SIGINT)
 
 # Commands whose config is composed by Hydra, and the primary config of each.
 HYDRA_COMMANDS = {"train": "config", "jocc": "config", "eval": "config", "bench": "bench"}
@@ -89,7 +97,7 @@ COMMON_KEYS = {
         ("checkpoint", "run directory (its checkpoints/last.pt) or checkpoint file; required"),
         ("experiment.eval_episodes", "scenarios evaluated"),
         ("experiment.eval_intervals", "control intervals per evaluation episode"),
-        ("seed", "random seed"),
+        ("seed", "random seed (it picks the held-out scenarios)"),
         ("device", "cpu, cuda or cuda:N"),
     ],
 }
@@ -109,7 +117,9 @@ EXAMPLES = {
     ],
     "eval": [
         "vdtn-marl eval checkpoint=outputs/jocc/<date_time>",
+        "vdtn-marl eval checkpoint=outputs/jocc/<date_time> experiment.eval_episodes=32",
         "vdtn-marl eval checkpoint=outputs/jocc/<date_time> rra=round_robin",
+        "vdtn-marl eval checkpoint=outputs/jocc/<date_time> --cfg job   # the config it uses",
     ],
 }
 
@@ -341,12 +351,14 @@ def command_help(command: str) -> str:
         f"{COMMANDS[command]}.",
         _COMMAND_DETAILS[command],
         "",
-        "config groups (GROUP=OPTION picks one; * marks the default):",
+        "config groups (GROUP=OPTION picks one; * marks the default):"
+        if command != "eval"
+        else "config groups (GROUP=OPTION replaces the run's option; * marks jocc's default):",
         *_group_lines("config"),
         "",
         "most used keys (default):",
         *(
-            f"  {k + '=':<{width}} {text} [default: {_fmt_default(_default_value(k))}]"
+            f"  {k + '=':<{width}} {text} [default: {_help_default(command, k)}]"
             for k, text in keys
         ),
         "  Every key of `--cfg job` can be set; an unknown key or a wrong type is an error.",
@@ -358,7 +370,7 @@ def command_help(command: str) -> str:
         "  hydra/launcher=ray                jobs on a Ray cluster (see the README)",
         "",
         "outputs: outputs/<command>/<date_time>/ (one run) or multirun/<command>/<date_time>/<n>/",
-        "  config.yaml (resolved config), metrics.csv, checkpoints/, summary.json, .hydra/",
+        *_OUTPUTS[command],
         "",
         "hydra flags: --cfg job | --cfg hydra | --info | --hydra-help",
         "",
@@ -368,13 +380,41 @@ def command_help(command: str) -> str:
     return "\n".join(lines)
 
 
+# What a run of each command writes in its folder (command help).
+_OUTPUTS = {
+    "jocc": [
+        "  config.yaml (resolved config), metrics.csv, evaluation.csv, checkpoints/last.pt,",
+        "  summary.json, plots (*.png), jocc.log (stages, checkpoints, final metrics), .hydra/",
+        "  A folder that holds a run is never overwritten: resume=true continues it.",
+    ],
+    "train": [
+        "  config.yaml (resolved config), metrics.csv, evaluation.csv, checkpoints/last.pt,",
+        "  summary.json, plots (*.png), train.log (stages, checkpoints, final metrics), .hydra/",
+        "  A folder that holds a run is never overwritten: resume=true continues it.",
+    ],
+    "eval": [
+        "  config.yaml (the run's config with your overrides), evaluation.csv, summary.json",
+        "  (with `warnings` naming policies the checkpoint never trained), eval.log, .hydra/",
+    ],
+}
+
+
+def _help_default(command: str, key: str) -> str:
+    """A key's default for help: eval takes most keys from the checkpoint's run."""
+    if command == "eval" and key.split(".")[0] not in _EVAL_FRESH_KEYS:
+        return "the run's"
+    return _fmt_default(_default_value(key))
+
+
 _COMMAND_DETAILS = {
     "jocc": "Iteration 0 trains control with a random RRA policy; each iteration trains π*\n"
     "(perfect observation) and π̃ (impaired), then the RRA agents with the reward of `rra`,\n"
     "and records per-iteration metrics (docs/model.md §5).",
     "train": "Trains the group named by `task` with `algo` (MAPPO/IPPO) on `scenario`.",
-    "eval": "Evaluates the policies of `checkpoint` (learned groups; non-learned `control`/`rra`\n"
-    "options by name) for experiment.eval_episodes episodes and writes summary.json.",
+    "eval": "Evaluates the policies of `checkpoint` with the config of its run (scenario, algo,\n"
+    "control, rra, experiment, seed); overrides on the command line change it, e.g.\n"
+    "experiment.eval_episodes=32, or rra=round_robin to pair the run's control with a baseline.\n"
+    "A task=control checkpoint is scored as π* on perfect observations, as its run did.",
 }
 
 
@@ -664,6 +704,15 @@ def _choice_of(overrides: Sequence[str], group: str) -> str | None:
     return None
 
 
+# Launcher options of conf/hydra/launcher (and the plugins' own): the plugin each needs, and
+# how to install it.
+_LAUNCHERS = {
+    "basic": None,
+    "joblib": "hydra_plugins.hydra_joblib_launcher",
+    "submitit_local": "hydra_plugins.hydra_submitit_launcher",
+    "submitit_slurm": "hydra_plugins.hydra_submitit_launcher",
+    "ray": "hydra_plugins.hydra_ray_launcher",
+}
 _LAUNCHER_PLUGINS = {
     "hydra_plugins.hydra_joblib_launcher": "hydra-joblib-launcher (pip install vdtn-marl)",
     "hydra_plugins.hydra_submitit_launcher": "pip install 'vdtn-marl[slurm]'",
@@ -671,23 +720,28 @@ _LAUNCHER_PLUGINS = {
 }
 
 
+def _installed(package: str) -> bool:
+    try:
+        return importlib.util.find_spec(package) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def usable_launchers() -> list[str]:
+    """The ``hydra/launcher`` options whose plugin is installed here."""
+    return [name for name, plugin in _LAUNCHERS.items() if plugin is None or _installed(plugin)]
+
+
 def _check_launcher(hydra_cfg: Any) -> None:
     target = str(hydra_cfg.launcher.get("_target_", ""))
     module = target.rpartition(".")[0]
     package = ".".join(module.split(".")[:2])
-    try:
-        found = importlib.util.find_spec(package) is not None
-    except (ImportError, ValueError):
-        found = False
-    if not found:
+    if not _installed(package):
         choice = hydra_cfg.runtime.choices.get("hydra/launcher")
         hint = _LAUNCHER_PLUGINS.get(package, f"install the package that provides {target}")
-        usable = ["basic"]
-        if importlib.util.find_spec("hydra_plugins.hydra_joblib_launcher"):
-            usable.append("joblib")
         raise CLIError(
             f"hydra/launcher={choice} needs the plugin {package}, which is not installed; "
-            f"{hint}; allowed here: {', '.join(usable)}"
+            f"{hint}; allowed here: {', '.join(usable_launchers())}"
         )
 
 
@@ -718,37 +772,67 @@ def to_run_config(data: dict, command: str = "jocc") -> Any:
     run_cfg = config.validate(config.from_dict(data))
     config.validate_device(run_cfg.device)
     if run_cfg.checkpoint is not None:
-        from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
-
-        try:
-            load_checkpoint(run_cfg.checkpoint, config.to_dict(run_cfg))
-        except CheckpointError as exc:
-            raise config.ConfigError(
-                f"checkpoint={run_cfg.checkpoint} cannot be used: {exc}; allowed: a checkpoint "
-                "written with the same scenario and network shapes"
-            ) from exc
+        _check_checkpoint(run_cfg, command)
     return run_cfg
+
+
+def _check_checkpoint(run_cfg: Any, command: str) -> None:
+    """The checkpoint fits the config's networks; for ``eval``, it holds a trained policy."""
+    from vdtn_marl.algos.checkpoint import (
+        CheckpointError,
+        ShapeMismatch,
+        load_checkpoint,
+        untrained_policies,
+    )
+    from vdtn_marl.config import ConfigError, to_dict
+
+    name = f"checkpoint={run_cfg.checkpoint}"
+    try:
+        payload = load_checkpoint(run_cfg.checkpoint, to_dict(run_cfg))
+    except ShapeMismatch as exc:
+        raise ConfigError(
+            f"{exc.key}={exc.given!r} does not fit {name}, whose networks were built with "
+            f"{exc.key}={exc.saved!r}; allowed: {exc.key}={exc.saved!r}, the value of the "
+            "checkpoint's run"
+        ) from exc
+    except CheckpointError as exc:
+        raise ConfigError(_checkpoint_problem(run_cfg.checkpoint, exc)) from exc
+    if command == "eval":
+        warnings, nothing_trained = untrained_policies(payload, to_dict(run_cfg))
+        if nothing_trained:
+            raise ConfigError(
+                f"{name} holds no trained policy to evaluate ({'; '.join(warnings)}); allowed: "
+                "a checkpoint whose run trained the policies that act"
+            )
+
+
+def _checkpoint_problem(value: Any, exc: Exception) -> str:
+    """A :class:`CheckpointError` as ``checkpoint=VALUE <problem>; allowed: ...``."""
+    problem = str(exc)
+    prefix = f"checkpoint {str(value)!r} "
+    problem = problem[len(prefix) :] if problem.startswith(prefix) else f"cannot be used: {problem}"
+    return f"checkpoint={value} {problem}; allowed: a checkpoint written by vdtn-marl"
 
 
 def _checkpoint_file(value: Any, required: bool) -> Any:
     from vdtn_marl.config import ConfigError
     from vdtn_marl.runs import CHECKPOINT_DIR
 
+    allowed = f"allowed: a run directory (with {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
     if value is None:
         if required:
-            raise ConfigError(
-                "checkpoint=None: eval needs the policies to evaluate; allowed: a run directory "
-                f"(its {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
-            )
+            raise ConfigError(f"checkpoint=None: eval needs the policies to evaluate; {allowed}")
         return None
     path = Path(str(value))
-    if path.is_dir() and (path / CHECKPOINT_DIR / "last.pt").is_file():
-        return str(path / CHECKPOINT_DIR / "last.pt")
-    if not path.is_file():
+    if path.is_dir():
+        if (path / CHECKPOINT_DIR / "last.pt").is_file():
+            return str(path / CHECKPOINT_DIR / "last.pt")
         raise ConfigError(
-            f"checkpoint={value} does not exist; allowed: a run directory (its "
-            f"{CHECKPOINT_DIR}/last.pt) or a checkpoint file"
+            f"checkpoint={value} is a folder without {CHECKPOINT_DIR}/last.pt (no run saved a "
+            f"checkpoint there); {allowed}"
         )
+    if not path.is_file():
+        raise ConfigError(f"checkpoint={value} does not exist; {allowed}")
     return str(path)
 
 
@@ -796,6 +880,40 @@ def _require_option(key: str, value: str, group: str) -> None:
                        f"{', '.join(options)}")  # fmt: skip
 
 
+def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: int | None) -> None:
+    """A job never overwrites a run: its folder (``hydra.run.dir``, or for job ``job_num`` of a
+    sweep ``hydra.sweep.dir/hydra.sweep.subdir``) must hold none, unless ``resume=true``
+    continues it (``train``/``jocc``; the config must then be the run's)."""
+    from omegaconf import open_dict, read_write
+
+    from vdtn_marl.runs import run_outputs
+
+    if run_cfg.resume and command != "eval":
+        if job_num is None:
+            _check_resume(run_cfg, data, cfg.hydra)
+        return
+    if job_num is None:
+        key, folder = "hydra.run.dir", Path(str(cfg.hydra.run.dir))
+        job_dir, where = folder, ""
+    else:
+        cfg = cfg.copy()
+        with read_write(cfg), open_dict(cfg):
+            cfg.hydra.job.num = job_num
+            key, folder = "hydra.sweep.dir", Path(str(cfg.hydra.sweep.dir))
+            job_dir = folder / str(cfg.hydra.sweep.subdir)
+        where = f" in {job_dir}"
+    found = run_outputs(job_dir)
+    if found:
+        allowed = (
+            f"another {key}"
+            if command == "eval"
+            else f"resume=true to continue it, or another {key}"
+        )
+        raise CLIError(
+            f"{key}={folder} already holds a run{where} ({', '.join(found)}); allowed: {allowed}"
+        )
+
+
 def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
     """resume=true: the run directory must hold a run whose config matches this one."""
     import yaml
@@ -821,6 +939,120 @@ def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
                 f"resume=true but {key}={new.get(key)!r} differs from the run's "
                 f"{old_file} ({key}={old.get(key)!r}); allowed: the run's own value"
             )
+
+
+# --- eval: the config of the checkpoint's run ----------------------------------------------
+
+# Keys of the machine and the invocation rather than of the experiment: eval does not take them
+# from the run (and takes the task from the checkpoint itself).
+_EVAL_FRESH_KEYS = ("checkpoint", "resume", "device", "threads", "progress", "task")
+_RUN_GROUPS = ("scenario", "algo", "control", "rra", "experiment")
+
+
+def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]:
+    """``eval checkpoint=RUN ...``: the overrides that recompose the config of the checkpoint's
+    run (its group options, then every key whose value differs from theirs), followed by
+    ``overrides``; entries of the run's that an override sets are left out, so the command
+    line wins. ``extra``: overrides for composing only (``hydra.searchpath``).
+
+    Without ``checkpoint=`` (or a checkpoint without a config) ``overrides`` is returned
+    as it is. Raises :class:`CLIError` for a bad checkpoint or a sweep over checkpoints."""
+    from hydra import initialize_config_module
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from vdtn_marl.config import ConfigError, register_configs
+
+    register_configs()
+    with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
+        parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
+        try:
+            parsed = parser.parse_overrides(overrides)
+        except Exception as exc:
+            raise CLIError(_translate(exc, "config", overrides)) from exc
+        given = [o for o in parsed if o.key_or_group == "checkpoint" and not o.is_delete()]
+        if not given:
+            return overrides
+        if given[-1].is_sweep_override():
+            raise CLIError(
+                f"{given[-1].input_line} is a sweep; eval takes the config of one run, so "
+                "allowed: one checkpoint per command (run eval once per run)"
+            )
+        try:
+            saved = _run_config_of(given[-1].value())
+        except ConfigError as exc:
+            raise CLIError(str(exc)) from exc
+        if saved is None:
+            return overrides
+        return [*_run_overrides(saved, parsed, extra), *overrides]
+
+
+def _run_config_of(checkpoint: Any) -> dict | None:
+    """The config (nested dict) stored in ``checkpoint`` (a run directory or a file)."""
+    from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
+    from vdtn_marl.config import ConfigError
+
+    path = _checkpoint_file(checkpoint, required=True)
+    try:
+        config = load_checkpoint(path).get("config")
+    except CheckpointError as exc:
+        raise ConfigError(_checkpoint_problem(path, exc)) from exc
+    return config if isinstance(config, dict) else None
+
+
+def _run_overrides(saved: dict, parsed: Sequence[Any], extra: Sequence[str]) -> list[str]:
+    """Overrides reproducing ``saved`` (a run's config) but for the keys ``parsed`` sets."""
+    from vdtn_marl.results import flatten
+
+    groups = [o for o in parsed if o.key_or_group in _RUN_GROUPS]
+    keys = [o.key_or_group for o in parsed if o.key_or_group not in _RUN_GROUPS]
+    # A group option replaces the run's: the keys of the group, and for `experiment` (whose
+    # options set keys across groups) the keys that the run's option and the new one set.
+    keys += [f"{o.key_or_group}." for o in groups]
+    for o in groups:
+        if o.key_or_group == "experiment" and not o.is_delete():
+            options = o.sweep_string_iterator() if o.is_sweep_override() else [str(o.value())]
+            for option in [*options, saved.get("experiment", {}).get("name")]:
+                data = _read_conf_yaml("experiment", f"{option}.yaml")
+                keys += list(flatten({k: v for k, v in data.items() if k != "defaults"}))
+
+    def kept(key: str) -> bool:
+        top = key.split(".")[0]
+        return top not in _EVAL_FRESH_KEYS and not any(
+            key == k or key.startswith(k if k.endswith(".") else f"{k}.") for k in keys
+        )
+
+    choices = [
+        f"{group}={saved[group]['name']}"
+        for group in _RUN_GROUPS
+        if group not in {o.key_or_group for o in groups}
+        and isinstance(saved.get(group), dict)
+        and saved[group].get("name") in group_options(group)
+    ]
+    base = flatten(_job_config(_compose("config", [*choices, *extra])))
+    values = []
+    for key, value in flatten(saved).items():
+        if not kept(key):
+            continue
+        if key in base:
+            if base[key] != value:
+                values.append(f"{key}={_hydra_value(value)}")
+        elif key.startswith("scenario.model."):  # a model parameter the scenario does not set
+            values.append(f"+{key}={_hydra_value(value)}")
+    return [*choices, *values]
+
+
+def _hydra_value(value: Any) -> str:
+    """``value`` in Hydra's override grammar (strings quoted)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "[" + ",".join(_hydra_value(v) for v in value) + "]"
+    return "'" + str(value).replace("'", "\\'") + "'"
 
 
 def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -> None:
@@ -852,8 +1084,9 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
                     _validate_bench(data, check_runs=not hargs.cfg)
                 else:
                     run_cfg = to_run_config(data, command)
-                    if run_cfg.resume and not hargs.multirun and not hargs.cfg:
-                        _check_resume(run_cfg, data, cfg.hydra)
+                    if not hargs.cfg:
+                        job_num = index if hargs.multirun else None
+                        _check_run_dir(command, run_cfg, data, cfg, job_num)
             except CLIError as exc:
                 raise CLIError(f"{exc}{where}") from exc
             except Exception as exc:
@@ -871,16 +1104,21 @@ def run_job(command: str, cfg: Any) -> dict:
 
     from vdtn_marl import results
     from vdtn_marl.algos import api
-    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text
+    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text, keep_log_off_console
 
     data = _job_config(cfg)
     run_cfg = to_run_config(data, command)
+    keep_log_off_console(run_cfg.progress)
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
     entry: Callable[..., dict] = {"train": api.train, "jocc": api.jocc, "eval": api.evaluate}[
         command
     ]
-    summary = entry(run_cfg, run_dir)
+    try:
+        summary = entry(run_cfg, run_dir)
+    except KeyboardInterrupt:
+        print(interrupted_message(command, run_dir), file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
     if HydraConfig.get().mode == RunMode.MULTIRUN:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
         return summary
@@ -891,6 +1129,37 @@ def run_job(command: str, cfg: Any) -> dict:
     if plots:
         print("plots: " + ", ".join(plots))
     return summary
+
+
+def interrupted_message(command: str, run_dir: Path) -> str:
+    """One line after Ctrl-C: the last checkpoint and the command that continues the run."""
+    import shlex
+
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    from vdtn_marl.runs import CHECKPOINT_DIR
+
+    hydra_cfg = HydraConfig.get()
+    if command == "eval":
+        return (
+            f"interrupted; eval writes summary.json only when it ends, so {run_dir} holds no "
+            "result: run the command again with another hydra.run.dir"
+        )
+    checkpoint = run_dir / CHECKPOINT_DIR / "last.pt"
+    where = (
+        f"the last checkpoint is {checkpoint}"
+        if checkpoint.is_file()
+        else "no checkpoint was written yet (the run starts over)"
+    )
+    if hydra_cfg.mode == RunMode.MULTIRUN:
+        return (
+            f"interrupted; {where}; continue the sweep with the same command plus resume=true "
+            f"hydra.sweep.dir={hydra_cfg.sweep.dir}"
+        )
+    task = [o for o in hydra_cfg.overrides.task if not o.startswith(("resume=", "+resume="))]
+    again = shlex.join([PROG, command, *task, "resume=true", f"hydra.run.dir={run_dir}"])
+    return f"interrupted; {where}; continue with: {again}"
 
 
 class SweepSummaryHint(Callback):
@@ -922,9 +1191,11 @@ def _bench_job(cfg: Any) -> None:
     from hydra.types import RunMode
 
     from vdtn_marl import config, leaderboard
+    from vdtn_marl.runs import keep_log_off_console
 
     hydra_cfg = HydraConfig.get()
     bench_cfg = config.validate_benchmark(leaderboard.bench_config(_job_config(cfg)))
+    keep_log_off_console(bench_cfg.progress)
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     # a sweep's job: its own overrides, as one command would set them
     command = shlex.join([PROG, "bench", *hydra_cfg.overrides.task])
@@ -968,10 +1239,30 @@ def _launch(command: str, hydra_argv: list[str]) -> int:
     saved = sys.argv
     sys.argv = [PROG, *hydra_argv]
     try:
-        app()
+        with _logging_restored():
+            app()
     finally:
         sys.argv = saved
     return 0
+
+
+@contextlib.contextmanager
+def _logging_restored() -> Iterator[None]:
+    """Give the root logger its handlers and level back after Hydra's job logging (whose
+    handlers write to the run's log file and to the stdout of the moment), closing Hydra's:
+    a caller in the same process (tests, scripts) logs as before."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        yield
+    finally:
+        for handler in [h for h in root.handlers if h not in handlers]:
+            root.removeHandler(handler)
+            handler.close()
+        for handler in handlers:
+            if handler not in root.handlers:
+                root.addHandler(handler)
+        root.setLevel(level)
 
 
 def _cmd_hydra(command: str, argv: list[str]) -> int:
@@ -987,23 +1278,34 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
     modes = [hargs.run, hargs.multirun, hargs.cfg, hargs.info, hargs.shell_completion]
     if sum(bool(m) for m in modes) > 1:
         _usage_error("only one of --run, -m/--multirun, --cfg, --info, --shell-completion")
-    overrides = [*hargs.overrides, f"hydra.job.name={command}"]
-    # Flags first, then the overrides: the order Hydra's own parser accepts.
-    hydra_argv = [*_flag_args(argv, list(hargs.overrides)), *overrides]
-    if hargs.config_dir:
-        # --config-dir for the pre-pass, which composes through the compose API.
-        searchpath = f"hydra.searchpath=[file://{Path(hargs.config_dir).resolve()}]"
-        overrides.append(searchpath)
+    # --config-dir for the pre-pass, which composes through the compose API.
+    searchpath = (
+        [f"hydra.searchpath=[file://{Path(hargs.config_dir).resolve()}]"]
+        if hargs.config_dir
+        else []
+    )
     passthrough = (
         hargs.hydra_help or hargs.info or hargs.shell_completion or hargs.experimental_rerun
     )
-    if not passthrough:
-        try:
-            prevalidate(command, hargs, overrides)
-        except CLIError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_CONFIG_ERROR
-    return _launch(command, hydra_argv)
+    try:
+        user = list(hargs.overrides)
+        if command == "eval" and not passthrough:
+            user = eval_overrides(user, searchpath)
+        overrides = [*user, f"hydra.job.name={command}"]
+        if not passthrough:
+            prevalidate(command, hargs, [*overrides, *searchpath])
+    except CLIError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    except KeyboardInterrupt:
+        print("interrupted before the run started; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    try:
+        # Flags first, then the overrides: the order Hydra's own parser accepts.
+        return _launch(command, [*_flag_args(argv, list(hargs.overrides)), *overrides])
+    except KeyboardInterrupt:  # outside a job's entry point (which says more; see run_job)
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

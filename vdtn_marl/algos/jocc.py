@@ -67,6 +67,7 @@ from vdtn_marl.runs import (
     MetricsLog,
     atomic_write_bytes,
     atomic_write_json,
+    logged_stage,
     progress,
 )
 from vdtn_marl.sim.cacc import CACCController
@@ -75,6 +76,12 @@ from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
+STAGE_POLICIES = {
+    "control_perfect": "π*",
+    "control_impaired": "π̃",
+    "rra": "the RRA agents",
+}
+"""Who a training stage trains (for the run log)."""
 TASK_STAGES = {
     "jocc": STAGES,
     "control": ("control_perfect", "evaluate"),
@@ -356,15 +363,17 @@ class JointOptimisation:
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
         every = self.cfg.experiment.checkpoint_every
-        while trainer.iteration < end:
-            stats = trainer.train_iteration()
-            row = {"jocc_iteration": self.position["iteration"], "stage": stage}
-            row.update(stats.__dict__)
-            self.train_log.log(row, step=None)
-            bar.update(1)
-            bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
-            if every and trainer.iteration < end and trainer.iteration % every == 0:
-                self.save()
+        what = f"{STAGE_POLICIES[stage]} for {end - trainer.iteration} PPO iterations"
+        with logged_stage(stage, what, self.position["iteration"]):
+            while trainer.iteration < end:
+                stats = trainer.train_iteration()
+                row = {"jocc_iteration": self.position["iteration"], "stage": stage}
+                row.update(stats.__dict__)
+                self.train_log.log(row, step=None)
+                bar.update(1)
+                bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
+                if every and trainer.iteration < end and trainer.iteration % every == 0:
+                    self.save()
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
@@ -447,7 +456,10 @@ class JointOptimisation:
             while self.position["iteration"] < cfg.experiment.jocc_iterations:
                 stage = self.stages[self.position["stage"]]
                 if stage == "evaluate":
-                    self.evaluate()
+                    e = cfg.experiment
+                    what = f"{e.eval_episodes} episodes of {e.eval_intervals} intervals"
+                    with logged_stage(stage, what, self.position["iteration"]):
+                        self.evaluate()
                     bar.update(1)
                 else:
                     self._train_stage(stage, bar)
