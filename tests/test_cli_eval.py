@@ -109,7 +109,7 @@ def test_eval_overrides_recompose_the_run_config_exactly(overrides, tmp_path):
     run = tmp_path / "run"
     data = _make_run(run, overrides, trained=TRAINED)
     composed = _compose(cli.eval_overrides([f"checkpoint={run}"]))
-    for key in cli._EVAL_FRESH_KEYS:
+    for key in cli.EVAL_FRESH_KEYS:
         data.pop(key), composed.pop(key)
     assert composed == data
 
