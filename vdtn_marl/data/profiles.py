@@ -205,10 +205,16 @@ def load_trace_source(
             f"{Path(path).name}: no {kind} profile left after selection, cleaning and "
             f"part={part!r}; loosen the selection (e.g. min_duration_s, speed_range_mps)"
         )
+    return _file_source(kind, path, profiles, f"part={part}, split v{SPLIT_VERSION}", too_short)
+
+
+def _file_source(
+    kind: str, path: str | Path, profiles: list[SpeedProfile], how: str, too_short: TooShort
+) -> ProfileTraceSource:
+    """A source over ``profiles`` read from ``path``; ``how`` says which part of the file."""
     info = TraceInfo(
         name=f"{kind}:{Path(path).name}",
-        description=f"{len(profiles)} {kind} speed profiles from {Path(path).name} "
-        f"(part={part}, split v{SPLIT_VERSION})",
+        description=f"{len(profiles)} {kind} speed profiles from {Path(path).name} ({how})",
         synthetic=False,
         source=profiles[0].source,
         license=FILE_LICENSES.get(kind, ""),
@@ -267,20 +273,11 @@ def load_train_eval_sources(
         parts = {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}
         how = f"first {TIME_SPLIT_TRAIN_FRACTION:.0%} / last {1 - TIME_SPLIT_TRAIN_FRACTION:.0%}"
         how += " of each profile's duration"
-
-    def source(part: str) -> ProfileTraceSource:
-        chosen = parts[part]
-        info = TraceInfo(
-            name=f"{kind}:{Path(path).name}",
-            description=f"{len(chosen)} {kind} speed profiles from {Path(path).name} "
-            f"(part={part}, {how})",
-            synthetic=False,
-            source=chosen[0].source,
-            license=FILE_LICENSES.get(kind, ""),
-        )
-        return ProfileTraceSource(chosen, info, too_short=too_short)
-
-    return source("train"), source("eval")
+    train, evaluation = (
+        _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
+        for part in ("train", "eval")
+    )
+    return train, evaluation
 
 
 class NGSIMTraceSource(ProfileTraceSource):
