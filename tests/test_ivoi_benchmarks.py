@@ -112,7 +112,7 @@ def test_bad_arguments_name_the_value(checkpoint, tmp_path):
         script.main([str(control_only), "--output", str(tmp_path / "x.json")])
     broken = tmp_path / "broken.pt"
     broken.write_bytes(b"not a checkpoint")
-    with pytest.raises(SystemExit, match="truncated or not a vdtn-marl checkpoint"):
+    with pytest.raises(SystemExit, match="is not a vdtn-marl checkpoint"):
         script.main([str(broken), "--output", str(tmp_path / "x.json")])
     assert not (tmp_path / "x.json").exists()
 

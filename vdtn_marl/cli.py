@@ -10,108 +10,59 @@ registry; ``rollout`` forwards to :mod:`vdtn_marl.rollout`.
 How a Hydra command runs:
 
 1. The command word is taken out of the arguments; Hydra's own argument parser reads the rest.
-2. Pre-pass: every job's config is composed with Hydra's compose API (for ``-m``, one per
+2. ``eval checkpoint=RUN``: the overrides that recompose the config of the checkpoint's run
+   go before the user's (:func:`eval_overrides`), so eval uses the run's config and the
+   command line changes it.
+3. Pre-pass: every job's config is composed with Hydra's compose API (for ``-m``, one per
    combination of the sweep, expanded as Hydra's basic sweeper does), converted to a
    :class:`RunConfig`, and checked by :func:`vdtn_marl.config.validate` and
-   :func:`vdtn_marl.config.validate_device`. A bad config prints one line,
+   :func:`vdtn_marl.config.validate_device`; the job's folder must not hold a run unless
+   ``resume=true`` continues it. A bad config prints one line,
    ``error: KEY=VALUE ... allowed ...``, and exits with code 2 before anything is written.
-3. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
+4. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
    ``--cfg``, ``--info`` behave as in any Hydra app). Each job writes ``config.yaml`` (the
    resolved config) to its run directory and calls the entry point, which writes
-   ``metrics.csv``, ``checkpoints/`` and ``summary.json`` there.
+   ``metrics.csv``, ``checkpoints/`` and ``summary.json`` there, and logs its stages to
+   ``<command>.log``. Ctrl-C prints the command that continues the run and exits with 130.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
 import importlib
 import importlib.util
 import json
+import logging
 import os
 import re
 import sys
 import textwrap
 import warnings
-from collections.abc import Callable, Sequence
-from importlib import resources
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 from hydra.experimental.callback import Callback
 
 from vdtn_marl import __version__
+from vdtn_marl.cli_help import (
+    COMMANDS,
+    CONFIG_PACKAGE,
+    EVAL_FRESH_KEYS,
+    PROG,
+    command_help,
+    group_options,
+    read_conf_yaml,
+    top_help,
+)
 from vdtn_marl.registry import EnvSpec, list_envs, spec
 
-PROG = "vdtn-marl"
-CONFIG_PACKAGE = "vdtn_marl.conf"
 EXIT_CONFIG_ERROR = 2
-
+EXIT_INTERRUPTED = 130  # the shell's code for Ctrl-C (128 + SIGINT)
 # Commands whose config is composed by Hydra, and the primary config of each.
 HYDRA_COMMANDS = {"train": "config", "jocc": "config", "eval": "config", "bench": "bench"}
-COMMANDS = {
-    "jocc": "joint optimisation of control and communication (JOCC): the main experiment",
-    "train": "train one agent group: task=control (π*), control_impaired (π̃) or rra",
-    "eval": "evaluate the trained policies of a run (checkpoint=RUN_DIR)",
-    "bench": "run or resume a leaderboard benchmark (benchmark=NAME); `bench summarize DIR`",
-    "envs": "list the registered environments: agents, clocks, descriptions",
-    "rollout": "a short random-policy rollout of an environment (quick start)",
-}
-GROUPS = {
-    "scenario": "the simulated platoon and radio (size, sub-channels, bandwidth, traces)",
-    "algo": "the MARL learner",
-    "control": "who drives the followers",
-    "rra": "who allocates radio resources, and the RRA reward",
-    "experiment": "budgets: iterations, batch sizes, evaluation episodes",
-}
-# Most used keys of each command: (key, what it does). Defaults are read from conf/.
-COMMON_KEYS = {
-    "jocc": [
-        ("rra.kappa1", "weight κ1 of V2I throughput in the RRA reward, in [0, 1]"),
-        ("rra.kappa2", "weight κ2 of IVoI; null (default) means 1 − κ1"),
-        ("rra.ivoi_estimator", "td or rollout"),
-        ("experiment.jocc_iterations", "JOCC iterations"),
-        ("seed", "random seed"),
-        ("device", "cpu, cuda or cuda:N"),
-        ("resume", "true: continue the run in hydra.run.dir"),
-    ],
-    "train": [
-        ("task", "control (π*, perfect observation), control_impaired (π̃) or rra"),
-        ("experiment.control_iterations", "PPO iterations when training control"),
-        ("experiment.rra_iterations", "PPO iterations when training RRA"),
-        ("algo.num_envs", "scenarios collected in parallel"),
-        ("algo.lr", "learning rate"),
-        ("seed", "random seed"),
-        ("device", "cpu, cuda or cuda:N"),
-        ("resume", "true: continue the run in hydra.run.dir"),
-    ],
-    "eval": [
-        ("checkpoint", "run directory (its checkpoints/last.pt) or checkpoint file; required"),
-        ("experiment.eval_episodes", "scenarios evaluated"),
-        ("experiment.eval_intervals", "control intervals per evaluation episode"),
-        ("seed", "random seed"),
-        ("device", "cpu, cuda or cuda:N"),
-    ],
-}
-EXAMPLES = {
-    "jocc": [
-        "vdtn-marl jocc experiment=smoke",
-        "vdtn-marl jocc rra.kappa1=0.7 seed=3",
-        "vdtn-marl jocc --cfg job",
-        "vdtn-marl -m jocc rra.kappa1=0,0.25,0.5,0.75,1 seed=0,1,2 hydra/launcher=joblib",
-        "vdtn-marl bench summarize multirun/jocc/<date_time>",
-        "vdtn-marl jocc hydra.run.dir=outputs/jocc/<date_time> resume=true",
-    ],
-    "train": [
-        "vdtn-marl train algo=mappo scenario=platoon4 experiment=smoke",
-        "vdtn-marl train task=rra rra=drra algo=ippo",
-        "vdtn-marl train task=control_impaired control.augmentation=false",
-    ],
-    "eval": [
-        "vdtn-marl eval checkpoint=outputs/jocc/<date_time>",
-        "vdtn-marl eval checkpoint=outputs/jocc/<date_time> rra=round_robin",
-    ],
-}
 
 # Hydra flags that take a value (the value is never the command word).
 _VALUE_FLAGS = {
@@ -217,208 +168,6 @@ def _cmd_rollout(rest: list[str]) -> int:
         return 1
     rc = rollout.main(rest)
     return rc if isinstance(rc, int) else 0
-
-
-# --- help ----------------------------------------------------------------------------------
-
-
-def _conf_root() -> Any:
-    return resources.files(CONFIG_PACKAGE)
-
-
-def group_options(group: str) -> list[str]:
-    """Names of the configs of ``group`` shipped in conf/ (e.g. ``scenario`` -> platoon4, ...)."""
-    folder = _conf_root()
-    for part in group.split("/"):
-        folder = folder / part
-    if not folder.is_dir():
-        return []
-    return sorted(p.name[: -len(".yaml")] for p in folder.iterdir() if p.name.endswith(".yaml"))
-
-
-def _read_conf_yaml(*parts: str) -> dict:
-    import yaml
-
-    node = _conf_root()
-    for part in parts:
-        node = node / part
-    try:
-        return yaml.safe_load(node.read_text(encoding="utf-8")) or {}
-    except (FileNotFoundError, yaml.YAMLError):
-        return {}
-
-
-def _default_choices(config_name: str) -> dict[str, str]:
-    choices = {}
-    for item in _read_conf_yaml(f"{config_name}.yaml").get("defaults", []):
-        if isinstance(item, dict):
-            choices.update({str(k): str(v) for k, v in item.items()})
-    return choices
-
-
-def _default_value(key: str) -> Any:
-    """Default of ``key`` as shipped in conf/ (group defaults, then config.yaml), for help."""
-    choices = _default_choices("config")
-    group, _, rest = key.partition(".")
-    sources = []
-    if rest and group in choices:
-        sources.append((_read_conf_yaml("experiment", f"{choices['experiment']}.yaml"), key))
-        sources.append((_read_conf_yaml(group, f"{choices[group]}.yaml"), rest))
-    else:
-        sources.append((_read_conf_yaml("config.yaml"), key))
-    for data, path in sources:
-        node: Any = data
-        for part in path.split("."):
-            node = node.get(part, KeyError) if isinstance(node, dict) else KeyError
-        if node is not KeyError:
-            return node
-    return "?"
-
-
-def _fmt_default(value: Any) -> str:
-    if value is None:
-        return "null"
-    return str(value).lower() if isinstance(value, bool) else str(value)
-
-
-def top_help() -> str:
-    lines = [
-        f"usage: {PROG} [-m] COMMAND [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]",
-        f"       {PROG} COMMAND --help | {PROG} --version",
-        "",
-        "Multi-agent RL benchmark: platoon control and C-V2X radio resource allocation in a",
-        "Vehicular Digital Twin Network. Configs are Hydra configs (shipped in vdtn_marl/conf).",
-        "",
-        "commands:",
-        *(f"  {name:<9} {text}" for name, text in COMMANDS.items()),
-        "",
-        "config groups (GROUP=OPTION picks one; * marks the default):",
-        *_group_lines("config"),
-        "",
-        "overrides:",
-        "  KEY=VALUE      set any key: rra.kappa1=0.7 seed=3 device=cuda algo.num_envs=32",
-        "  -m, --multirun one job per combination: -m jocc rra.kappa1=0,0.5,1 seed=0,1",
-        "  hydra/launcher=basic|joblib|submitit_slurm|ray   where the jobs of a sweep run",
-        "  hydra.run.dir=DIR / hydra.sweep.dir=DIR          where outputs go",
-        "",
-        "hydra flags:",
-        "  --cfg job      print the composed config and exit (--cfg hydra, --cfg all, --resolve)",
-        "  --info         Hydra's view: config search path, defaults tree, plugins",
-        "  --hydra-help   Hydra's own help",
-        "",
-        "examples:",
-        "  vdtn-marl envs",
-        "  vdtn-marl jocc experiment=smoke",
-        "  vdtn-marl train algo=mappo scenario=platoon4 experiment=smoke",
-        "  vdtn-marl -m jocc rra.kappa1=0,0.5,1 seed=0,1 hydra/launcher=joblib",
-        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
-        "",
-        f"Run `{PROG} COMMAND --help` for a command's keys and examples. A bad config prints one",
-        "line `error: KEY=VALUE ...` and exits with code 2 before anything is written.",
-    ]
-    return "\n".join(lines)
-
-
-def _group_lines(config_name: str) -> list[str]:
-    defaults = _default_choices(config_name)
-    groups = GROUPS if config_name == "config" else {"benchmark": "scenarios × methods × seeds"}
-    out = []
-    for group, text in groups.items():
-        options = [f"{o}*" if o == defaults.get(group) else o for o in group_options(group)]
-        out.append(f"  {group:<11} {text}")
-        out.append(f"  {'':<11}   {', '.join(options)}")
-    return out
-
-
-def command_help(command: str) -> str:
-    if command == "bench":
-        return bench_help()
-    keys = COMMON_KEYS[command]
-    width = max(len(k) for k, _ in keys) + 2
-    lines = [
-        f"usage: {PROG} [-m] {command} [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]",
-        "",
-        f"{COMMANDS[command]}.",
-        _COMMAND_DETAILS[command],
-        "",
-        "config groups (GROUP=OPTION picks one; * marks the default):",
-        *_group_lines("config"),
-        "",
-        "most used keys (default):",
-        *(
-            f"  {k + '=':<{width}} {text} [default: {_fmt_default(_default_value(k))}]"
-            for k, text in keys
-        ),
-        "  Every key of `--cfg job` can be set; an unknown key or a wrong type is an error.",
-        "",
-        "sweeps and launchers:",
-        f"  {'-m ' + command + ' KEY=A,B,C ...':<33} one job per combination (basic: in turn)",
-        "  hydra/launcher=joblib             jobs in parallel processes on this machine",
-        "  hydra/launcher=submitit_slurm     jobs on SLURM (pip install 'vdtn-marl[slurm]')",
-        "  hydra/launcher=ray                jobs on a Ray cluster (see the README)",
-        "",
-        "outputs: outputs/<command>/<date_time>/ (one run) or multirun/<command>/<date_time>/<n>/",
-        "  config.yaml (resolved config), metrics.csv, checkpoints/, summary.json, .hydra/",
-        "",
-        "hydra flags: --cfg job | --cfg hydra | --info | --hydra-help",
-        "",
-        "examples:",
-        *(f"  {e}" for e in EXAMPLES[command]),
-    ]
-    return "\n".join(lines)
-
-
-_COMMAND_DETAILS = {
-    "jocc": "Iteration 0 trains control with a random RRA policy; each iteration trains π*\n"
-    "(perfect observation) and π̃ (impaired), then the RRA agents with the reward of `rra`,\n"
-    "and records per-iteration metrics (docs/model.md §5).",
-    "train": "Trains the group named by `task` with `algo` (MAPPO/IPPO) on `scenario`.",
-    "eval": "Evaluates the policies of `checkpoint` (learned groups; non-learned `control`/`rra`\n"
-    "options by name) for experiment.eval_episodes episodes and writes summary.json.",
-}
-
-
-def bench_help() -> str:
-    lines = [
-        f"usage: {PROG} bench [benchmark=NAME] [KEY=VALUE ...] [--cfg job]",
-        f"       {PROG} -m bench benchmark=NAME shard=0,1 num_shards=2 hydra/launcher=joblib",
-        f"       {PROG} bench summarize SWEEP_DIR [--csv PATH] [--plot PATH]",
-        "",
-        "bench benchmark=NAME: run a benchmark, scenarios × methods × seeds (conf/benchmark/),",
-        "one `jocc` run per cell in OUT_DIR/<scenario>/<method>/seed<k>/, then aggregate it across",
-        "seeds (mean and IQM with 95% bootstrap CIs) into LEADERBOARD.md, leaderboard.json,",
-        "leaderboard_marl_eval.json (marl-eval raw data), leaderboard.csv and PNG plots in",
-        "REPORT_DIR. Cells with a complete summary.json are skipped: rerun the same command to",
-        "resume. `--cfg job` shows the benchmark.",
-        "",
-        "bench summarize: collect every job of a finished sweep (its summary.json, config.yaml",
-        "and .hydra/overrides.yaml) into one table, printed and written as SWEEP_DIR/summary.csv,",
-        "and plot control cost against V2I throughput per link (Mbps) coloured by κ1, with the",
-        "Pareto front, as SWEEP_DIR/pareto_kappa1.png.",
-        "",
-        "config groups (* marks the default):",
-        *_group_lines("bench"),
-        "",
-        "keys (default):",
-        f"  out_dir=DIR        the cells' run directories [default: {_bench_default('out_dir')}]",
-        "  report_dir=DIR     where the report goes [default: out_dir]",
-        "  shard=K num_shards=N   this job runs cells K, K+N, ... (for -m sweeps) [0, 1]",
-        "  report=false       run the cells only",
-        "  device=cpu|cuda    device of every run [default: cpu]",
-        "",
-        "examples:",
-        "  vdtn-marl bench benchmark=smoke",
-        "  vdtn-marl bench benchmark=reduced report_dir=benchmarks/results",
-        "  vdtn-marl bench benchmark=leaderboard --cfg job",
-        "  OMP_NUM_THREADS=1 vdtn-marl -m bench benchmark=leaderboard shard=0,1 num_shards=2 \\",
-        "      hydra/launcher=joblib",
-        "  vdtn-marl bench summarize multirun/jocc/<date_time>",
-    ]
-    return "\n".join(lines)
-
-
-def _bench_default(key: str) -> str:
-    return str(_read_conf_yaml("bench.yaml").get(key, "?"))
 
 
 # --- bench summarize -----------------------------------------------------------------------
@@ -664,6 +413,15 @@ def _choice_of(overrides: Sequence[str], group: str) -> str | None:
     return None
 
 
+# Launcher options of conf/hydra/launcher (and the plugins' own): the plugin each needs, and
+# how to install it.
+_LAUNCHERS = {
+    "basic": None,
+    "joblib": "hydra_plugins.hydra_joblib_launcher",
+    "submitit_local": "hydra_plugins.hydra_submitit_launcher",
+    "submitit_slurm": "hydra_plugins.hydra_submitit_launcher",
+    "ray": "hydra_plugins.hydra_ray_launcher",
+}
 _LAUNCHER_PLUGINS = {
     "hydra_plugins.hydra_joblib_launcher": "hydra-joblib-launcher (pip install vdtn-marl)",
     "hydra_plugins.hydra_submitit_launcher": "pip install 'vdtn-marl[slurm]'",
@@ -671,23 +429,28 @@ _LAUNCHER_PLUGINS = {
 }
 
 
+def _installed(package: str) -> bool:
+    try:
+        return importlib.util.find_spec(package) is not None
+    except (ImportError, ValueError):
+        return False
+
+
+def usable_launchers() -> list[str]:
+    """The ``hydra/launcher`` options whose plugin is installed here."""
+    return [name for name, plugin in _LAUNCHERS.items() if plugin is None or _installed(plugin)]
+
+
 def _check_launcher(hydra_cfg: Any) -> None:
     target = str(hydra_cfg.launcher.get("_target_", ""))
     module = target.rpartition(".")[0]
     package = ".".join(module.split(".")[:2])
-    try:
-        found = importlib.util.find_spec(package) is not None
-    except (ImportError, ValueError):
-        found = False
-    if not found:
+    if not _installed(package):
         choice = hydra_cfg.runtime.choices.get("hydra/launcher")
         hint = _LAUNCHER_PLUGINS.get(package, f"install the package that provides {target}")
-        usable = ["basic"]
-        if importlib.util.find_spec("hydra_plugins.hydra_joblib_launcher"):
-            usable.append("joblib")
         raise CLIError(
             f"hydra/launcher={choice} needs the plugin {package}, which is not installed; "
-            f"{hint}; allowed here: {', '.join(usable)}"
+            f"{hint}; allowed here: {', '.join(usable_launchers())}"
         )
 
 
@@ -718,37 +481,67 @@ def to_run_config(data: dict, command: str = "jocc") -> Any:
     run_cfg = config.validate(config.from_dict(data))
     config.validate_device(run_cfg.device)
     if run_cfg.checkpoint is not None:
-        from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
-
-        try:
-            load_checkpoint(run_cfg.checkpoint, config.to_dict(run_cfg))
-        except CheckpointError as exc:
-            raise config.ConfigError(
-                f"checkpoint={run_cfg.checkpoint} cannot be used: {exc}; allowed: a checkpoint "
-                "written with the same scenario and network shapes"
-            ) from exc
+        _check_checkpoint(run_cfg, command)
     return run_cfg
+
+
+def _check_checkpoint(run_cfg: Any, command: str) -> None:
+    """The checkpoint fits the config's networks; for ``eval``, it holds a trained policy."""
+    from vdtn_marl.algos.checkpoint import (
+        CheckpointError,
+        ShapeMismatch,
+        load_checkpoint,
+        untrained_policies,
+    )
+    from vdtn_marl.config import ConfigError, to_dict
+
+    name = f"checkpoint={run_cfg.checkpoint}"
+    try:
+        payload = load_checkpoint(run_cfg.checkpoint, to_dict(run_cfg))
+    except ShapeMismatch as exc:
+        raise ConfigError(
+            f"{exc.key}={exc.given!r} does not fit {name}, whose networks were built with "
+            f"{exc.key}={exc.saved!r}; allowed: {exc.key}={exc.saved!r}, the value of the "
+            "checkpoint's run"
+        ) from exc
+    except CheckpointError as exc:
+        raise ConfigError(_checkpoint_problem(run_cfg.checkpoint, exc)) from exc
+    if command == "eval":
+        warnings, nothing_trained = untrained_policies(payload, to_dict(run_cfg))
+        if nothing_trained:
+            raise ConfigError(
+                f"{name} holds no trained policy to evaluate ({'; '.join(warnings)}); allowed: "
+                "a checkpoint whose run trained the policies that act"
+            )
+
+
+def _checkpoint_problem(value: Any, exc: Exception) -> str:
+    """A :class:`CheckpointError` as ``checkpoint=VALUE <problem>; allowed: ...``."""
+    problem = str(exc)
+    prefix = f"checkpoint {str(value)!r} "
+    problem = problem[len(prefix) :] if problem.startswith(prefix) else f"cannot be used: {problem}"
+    return f"checkpoint={value} {problem}; allowed: a checkpoint written by vdtn-marl"
 
 
 def _checkpoint_file(value: Any, required: bool) -> Any:
     from vdtn_marl.config import ConfigError
     from vdtn_marl.runs import CHECKPOINT_DIR
 
+    allowed = f"allowed: a run directory (with {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
     if value is None:
         if required:
-            raise ConfigError(
-                "checkpoint=None: eval needs the policies to evaluate; allowed: a run directory "
-                f"(its {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
-            )
+            raise ConfigError(f"checkpoint=None: eval needs the policies to evaluate; {allowed}")
         return None
     path = Path(str(value))
-    if path.is_dir() and (path / CHECKPOINT_DIR / "last.pt").is_file():
-        return str(path / CHECKPOINT_DIR / "last.pt")
-    if not path.is_file():
+    if path.is_dir():
+        if (path / CHECKPOINT_DIR / "last.pt").is_file():
+            return str(path / CHECKPOINT_DIR / "last.pt")
         raise ConfigError(
-            f"checkpoint={value} does not exist; allowed: a run directory (its "
-            f"{CHECKPOINT_DIR}/last.pt) or a checkpoint file"
+            f"checkpoint={value} is a folder without {CHECKPOINT_DIR}/last.pt (no run saved a "
+            f"checkpoint there); {allowed}"
         )
+    if not path.is_file():
+        raise ConfigError(f"checkpoint={value} does not exist; {allowed}")
     return str(path)
 
 
@@ -796,6 +589,40 @@ def _require_option(key: str, value: str, group: str) -> None:
                        f"{', '.join(options)}")  # fmt: skip
 
 
+def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: int | None) -> None:
+    """A job never overwrites a run: its folder (``hydra.run.dir``, or for job ``job_num`` of a
+    sweep ``hydra.sweep.dir/hydra.sweep.subdir``) must hold none, unless ``resume=true``
+    continues it (``train``/``jocc``; the config must then be the run's)."""
+    from omegaconf import open_dict, read_write
+
+    from vdtn_marl.runs import run_outputs
+
+    if run_cfg.resume and command != "eval":
+        if job_num is None:
+            _check_resume(run_cfg, data, cfg.hydra)
+        return
+    if job_num is None:
+        key, folder = "hydra.run.dir", Path(str(cfg.hydra.run.dir))
+        job_dir, where = folder, ""
+    else:
+        cfg = cfg.copy()
+        with read_write(cfg), open_dict(cfg):
+            cfg.hydra.job.num = job_num
+            key, folder = "hydra.sweep.dir", Path(str(cfg.hydra.sweep.dir))
+            job_dir = folder / str(cfg.hydra.sweep.subdir)
+        where = f" in {job_dir}"
+    found = run_outputs(job_dir)
+    if found:
+        allowed = (
+            f"another {key}"
+            if command == "eval"
+            else f"resume=true to continue it, or another {key}"
+        )
+        raise CLIError(
+            f"{key}={folder} already holds a run{where} ({', '.join(found)}); allowed: {allowed}"
+        )
+
+
 def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
     """resume=true: the run directory must hold a run whose config matches this one."""
     import yaml
@@ -821,6 +648,117 @@ def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
                 f"resume=true but {key}={new.get(key)!r} differs from the run's "
                 f"{old_file} ({key}={old.get(key)!r}); allowed: the run's own value"
             )
+
+
+# --- eval: the config of the checkpoint's run ----------------------------------------------
+
+_RUN_GROUPS = ("scenario", "algo", "control", "rra", "experiment")
+
+
+def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]:
+    """``eval checkpoint=RUN ...``: the overrides that recompose the config of the checkpoint's
+    run (its group options, then every key whose value differs from theirs), followed by
+    ``overrides``; entries of the run's that an override sets are left out, so the command
+    line wins. ``extra``: overrides for composing only (``hydra.searchpath``).
+
+    Without ``checkpoint=`` (or a checkpoint without a config) ``overrides`` is returned
+    as it is. Raises :class:`CLIError` for a bad checkpoint or a sweep over checkpoints."""
+    from hydra import initialize_config_module
+    from hydra.core.global_hydra import GlobalHydra
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from vdtn_marl.config import ConfigError, register_configs
+
+    register_configs()
+    with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
+        parser = OverridesParser.create(config_loader=GlobalHydra.instance().config_loader())
+        try:
+            parsed = parser.parse_overrides(overrides)
+        except Exception as exc:
+            raise CLIError(_translate(exc, "config", overrides)) from exc
+        given = [o for o in parsed if o.key_or_group == "checkpoint" and not o.is_delete()]
+        if not given:
+            return overrides
+        if given[-1].is_sweep_override():
+            raise CLIError(
+                f"{given[-1].input_line} is a sweep; eval takes the config of one run, so "
+                "allowed: one checkpoint per command (run eval once per run)"
+            )
+        try:
+            saved = _run_config_of(given[-1].value())
+        except ConfigError as exc:
+            raise CLIError(str(exc)) from exc
+        if saved is None:
+            return overrides
+        return [*_run_overrides(saved, parsed, extra), *overrides]
+
+
+def _run_config_of(checkpoint: Any) -> dict | None:
+    """The config (nested dict) stored in ``checkpoint`` (a run directory or a file)."""
+    from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
+    from vdtn_marl.config import ConfigError
+
+    path = _checkpoint_file(checkpoint, required=True)
+    try:
+        config = load_checkpoint(path).get("config")
+    except CheckpointError as exc:
+        raise ConfigError(_checkpoint_problem(path, exc)) from exc
+    return config if isinstance(config, dict) else None
+
+
+def _run_overrides(saved: dict, parsed: Sequence[Any], extra: Sequence[str]) -> list[str]:
+    """Overrides reproducing ``saved`` (a run's config) but for the keys ``parsed`` sets."""
+    from vdtn_marl.results import flatten
+
+    groups = [o for o in parsed if o.key_or_group in _RUN_GROUPS]
+    keys = [o.key_or_group for o in parsed if o.key_or_group not in _RUN_GROUPS]
+    # A group option replaces the run's: the keys of the group, and for `experiment` (whose
+    # options set keys across groups) the keys that the run's option and the new one set.
+    keys += [f"{o.key_or_group}." for o in groups]
+    for o in groups:
+        if o.key_or_group == "experiment" and not o.is_delete():
+            options = o.sweep_string_iterator() if o.is_sweep_override() else [str(o.value())]
+            for option in [*options, saved.get("experiment", {}).get("name")]:
+                data = read_conf_yaml("experiment", f"{option}.yaml")
+                keys += list(flatten({k: v for k, v in data.items() if k != "defaults"}))
+
+    def kept(key: str) -> bool:
+        top = key.split(".")[0]
+        return top not in EVAL_FRESH_KEYS and not any(
+            key == k or key.startswith(k if k.endswith(".") else f"{k}.") for k in keys
+        )
+
+    choices = [
+        f"{group}={saved[group]['name']}"
+        for group in _RUN_GROUPS
+        if group not in {o.key_or_group for o in groups}
+        and isinstance(saved.get(group), dict)
+        and saved[group].get("name") in group_options(group)
+    ]
+    base = flatten(_job_config(_compose("config", [*choices, *extra])))
+    values = []
+    for key, value in flatten(saved).items():
+        if not kept(key):
+            continue
+        if key in base:
+            if base[key] != value:
+                values.append(f"{key}={_hydra_value(value)}")
+        elif key.startswith("scenario.model."):  # a model parameter the scenario does not set
+            values.append(f"+{key}={_hydra_value(value)}")
+    return [*choices, *values]
+
+
+def _hydra_value(value: Any) -> str:
+    """``value`` in Hydra's override grammar (strings quoted)."""
+    if value is None:
+        return "null"
+    if isinstance(value, bool):
+        return str(value).lower()
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, list | tuple):
+        return "[" + ",".join(_hydra_value(v) for v in value) + "]"
+    return "'" + str(value).replace("'", "\\'") + "'"
 
 
 def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -> None:
@@ -852,8 +790,9 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
                     _validate_bench(data, check_runs=not hargs.cfg)
                 else:
                     run_cfg = to_run_config(data, command)
-                    if run_cfg.resume and not hargs.multirun and not hargs.cfg:
-                        _check_resume(run_cfg, data, cfg.hydra)
+                    if not hargs.cfg:
+                        job_num = index if hargs.multirun else None
+                        _check_run_dir(command, run_cfg, data, cfg, job_num)
             except CLIError as exc:
                 raise CLIError(f"{exc}{where}") from exc
             except Exception as exc:
@@ -871,16 +810,21 @@ def run_job(command: str, cfg: Any) -> dict:
 
     from vdtn_marl import results
     from vdtn_marl.algos import api
-    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text
+    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text, keep_log_off_console
 
     data = _job_config(cfg)
     run_cfg = to_run_config(data, command)
+    keep_log_off_console(run_cfg.progress)
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
     entry: Callable[..., dict] = {"train": api.train, "jocc": api.jocc, "eval": api.evaluate}[
         command
     ]
-    summary = entry(run_cfg, run_dir)
+    try:
+        summary = entry(run_cfg, run_dir)
+    except KeyboardInterrupt:
+        print(interrupted_message(command, run_dir), file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
     if HydraConfig.get().mode == RunMode.MULTIRUN:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
         return summary
@@ -891,6 +835,37 @@ def run_job(command: str, cfg: Any) -> dict:
     if plots:
         print("plots: " + ", ".join(plots))
     return summary
+
+
+def interrupted_message(command: str, run_dir: Path) -> str:
+    """One line after Ctrl-C: the last checkpoint and the command that continues the run."""
+    import shlex
+
+    from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
+
+    from vdtn_marl.runs import CHECKPOINT_DIR
+
+    hydra_cfg = HydraConfig.get()
+    if command == "eval":
+        return (
+            f"interrupted; eval writes summary.json only when it ends, so {run_dir} holds no "
+            "result: run the command again with another hydra.run.dir"
+        )
+    checkpoint = run_dir / CHECKPOINT_DIR / "last.pt"
+    where = (
+        f"the last checkpoint is {checkpoint}"
+        if checkpoint.is_file()
+        else "no checkpoint was written yet (the run starts over)"
+    )
+    if hydra_cfg.mode == RunMode.MULTIRUN:
+        return (
+            f"interrupted; {where}; continue the sweep with the same command plus resume=true "
+            f"hydra.sweep.dir={hydra_cfg.sweep.dir}"
+        )
+    task = [o for o in hydra_cfg.overrides.task if not o.startswith(("resume=", "+resume="))]
+    again = shlex.join([PROG, command, *task, "resume=true", f"hydra.run.dir={run_dir}"])
+    return f"interrupted; {where}; continue with: {again}"
 
 
 class SweepSummaryHint(Callback):
@@ -922,9 +897,11 @@ def _bench_job(cfg: Any) -> None:
     from hydra.types import RunMode
 
     from vdtn_marl import config, leaderboard
+    from vdtn_marl.runs import keep_log_off_console
 
     hydra_cfg = HydraConfig.get()
     bench_cfg = config.validate_benchmark(leaderboard.bench_config(_job_config(cfg)))
+    keep_log_off_console(bench_cfg.progress)
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     # a sweep's job: its own overrides, as one command would set them
     command = shlex.join([PROG, "bench", *hydra_cfg.overrides.task])
@@ -968,10 +945,30 @@ def _launch(command: str, hydra_argv: list[str]) -> int:
     saved = sys.argv
     sys.argv = [PROG, *hydra_argv]
     try:
-        app()
+        with _logging_restored():
+            app()
     finally:
         sys.argv = saved
     return 0
+
+
+@contextlib.contextmanager
+def _logging_restored() -> Iterator[None]:
+    """Give the root logger its handlers and level back after Hydra's job logging (whose
+    handlers write to the run's log file and to the stdout of the moment), closing Hydra's:
+    a caller in the same process (tests, scripts) logs as before."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        yield
+    finally:
+        for handler in [h for h in root.handlers if h not in handlers]:
+            root.removeHandler(handler)
+            handler.close()
+        for handler in handlers:
+            if handler not in root.handlers:
+                root.addHandler(handler)
+        root.setLevel(level)
 
 
 def _cmd_hydra(command: str, argv: list[str]) -> int:
@@ -987,23 +984,34 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
     modes = [hargs.run, hargs.multirun, hargs.cfg, hargs.info, hargs.shell_completion]
     if sum(bool(m) for m in modes) > 1:
         _usage_error("only one of --run, -m/--multirun, --cfg, --info, --shell-completion")
-    overrides = [*hargs.overrides, f"hydra.job.name={command}"]
-    # Flags first, then the overrides: the order Hydra's own parser accepts.
-    hydra_argv = [*_flag_args(argv, list(hargs.overrides)), *overrides]
-    if hargs.config_dir:
-        # --config-dir for the pre-pass, which composes through the compose API.
-        searchpath = f"hydra.searchpath=[file://{Path(hargs.config_dir).resolve()}]"
-        overrides.append(searchpath)
+    # --config-dir for the pre-pass, which composes through the compose API.
+    searchpath = (
+        [f"hydra.searchpath=[file://{Path(hargs.config_dir).resolve()}]"]
+        if hargs.config_dir
+        else []
+    )
     passthrough = (
         hargs.hydra_help or hargs.info or hargs.shell_completion or hargs.experimental_rerun
     )
-    if not passthrough:
-        try:
-            prevalidate(command, hargs, overrides)
-        except CLIError as exc:
-            print(f"error: {exc}", file=sys.stderr)
-            return EXIT_CONFIG_ERROR
-    return _launch(command, hydra_argv)
+    try:
+        user = list(hargs.overrides)
+        if command == "eval" and not passthrough:
+            user = eval_overrides(user, searchpath)
+        overrides = [*user, f"hydra.job.name={command}"]
+        if not passthrough:
+            prevalidate(command, hargs, [*overrides, *searchpath])
+    except CLIError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_CONFIG_ERROR
+    except KeyboardInterrupt:
+        print("interrupted before the run started; nothing was written", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    try:
+        # Flags first, then the overrides: the order Hydra's own parser accepts.
+        return _launch(command, [*_flag_args(argv, list(hargs.overrides)), *overrides])
+    except KeyboardInterrupt:  # outside a job's entry point (which says more; see run_job)
+        print("interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -194,6 +194,15 @@ def _real(key: str, value: Any, low: float, high: float, *, low_open: bool = Fal
         raise ConfigError(f"{key}={value!r} is outside the allowed range {bracket}{low}, {high}]")
 
 
+def _check_task(cfg: RunConfig) -> None:
+    """``task=rra`` (of ``vdtn-marl train``) needs RRA agents that learn."""
+    if cfg.task == "rra" and not cfg.rra.learned:
+        raise ConfigError(
+            f"task=rra trains the RRA agents, but rra={cfg.rra.name} has nothing to learn; "
+            f"choose rra={'|'.join(LEARNED_RRA)}"
+        )
+
+
 def validate(cfg: RunConfig) -> RunConfig:
     """Check every key of ``cfg``; raise :class:`ConfigError` naming key, value and range."""
     s, a, c, r, e = cfg.scenario, cfg.algo, cfg.control, cfg.rra, cfg.experiment
@@ -271,6 +280,10 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
     _positive_int("threads", cfg.threads, low=0, high=1024)
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
+    _check_task(cfg)
+    from vdtn_marl.data.selection import check_trace_settings
+
+    check_trace_settings(s.traces, s.trace_path)
     if e.eval_intervals > s.episode_intervals:
         raise ConfigError(
             f"experiment.eval_intervals={e.eval_intervals!r} must be <= "
@@ -311,33 +324,11 @@ _NESTED = {
 
 
 def validate_device(device: str) -> str:
-    """Check that torch can use ``device`` here; raise :class:`ConfigError` naming ``device``."""
-    if not isinstance(device, str) or not device:
-        raise ConfigError(f"device={device!r} is not allowed; use cpu, cuda or cuda:N")
-    if device == "cpu":
-        return device
-    import torch
+    """Check that torch can use ``device`` here; raise :class:`ConfigError` naming ``device``
+    (:func:`vdtn_marl.sim.twin.resolve_device`)."""
+    from vdtn_marl.sim.twin import resolve_device
 
-    try:
-        parsed = torch.device(device)
-    except (RuntimeError, ValueError):
-        raise ConfigError(
-            f"device={device!r} is not a torch device; use cpu, cuda or cuda:N"
-        ) from None
-    if parsed.type == "cuda":
-        if not torch.cuda.is_available():
-            raise ConfigError(
-                f"device={device!r} is not available: torch.cuda.is_available() is False on "
-                "this machine (a CPU-only torch build, or no GPU); allowed: cpu"
-            )
-        count = torch.cuda.device_count()
-        if parsed.index is not None and parsed.index >= count:
-            raise ConfigError(
-                f"device={device!r} is not available: this machine has {count} CUDA "
-                f"device(s); allowed: cpu, cuda, cuda:0..cuda:{count - 1}"
-            )
-    elif parsed.type != "cpu":
-        raise ConfigError(f"device={device!r} is not supported; use cpu, cuda or cuda:N")
+    resolve_device(device)
     return device
 
 

@@ -16,6 +16,9 @@ import statistics
 import numpy as np
 
 import vdtn_marl
+from vdtn_marl.config import validate_device
+from vdtn_marl.envs.base import check_kappa
+from vdtn_marl.sim.params import ConfigError
 
 
 def run(intervals: int, seed: int, kappa1: float, device: str) -> dict[str, float]:
@@ -83,6 +86,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.intervals < 1:
         parser.error(f"--intervals={args.intervals} must be >= 1")
+    try:
+        check_kappa(args.kappa1, None)
+        validate_device(args.device)
+    except ConfigError as exc:
+        parser.error(str(exc))
     results = run(args.intervals, args.seed, args.kappa1, args.device)
     print_table(
         results,

@@ -1,21 +1,30 @@
-"""Run outputs: atomic files, the metrics CSV (and TensorBoard when installed), progress bars.
+"""Run outputs: atomic files, the metrics CSV (and TensorBoard when installed), progress bars,
+and the run log.
 
 Every file a run writes goes through :func:`atomic_write_bytes` (a temporary file in the same
 directory, then ``os.replace``), so an interrupted run never leaves a half-written summary,
 checkpoint or table.
+
+The run log: the package logs with :mod:`logging` under ``vdtn_marl.*``, a few lines per stage
+and checkpoint (:func:`logged_stage`, :func:`metrics_line`), never per PPO iteration. Inside
+the CLI, Hydra sends them to the run's ``<command>.log``; :func:`keep_log_off_console` keeps
+them off the terminal while progress bars show the same progress.
 """
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import json
+import logging
 import math
 import os
 import shlex
 import sys
 import tempfile
-from collections.abc import Iterable, Mapping
+import time
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +34,17 @@ RAW_EVALUATION_FILE = "evaluation_raw.npz"  # arrays of the last evaluation, for
 SUMMARY_FILE = "summary.json"
 CONFIG_FILE = "config.yaml"
 CHECKPOINT_DIR = "checkpoints"
+#: Files and folders whose presence means a folder holds a run (finished or not).
+RUN_OUTPUTS = (CONFIG_FILE, SUMMARY_FILE, METRICS_FILE, EVALUATION_FILE, CHECKPOINT_DIR)
+#: Root of the package's loggers.
+LOGGER = "vdtn_marl"
+
+_log = logging.getLogger(__name__)
+
+
+def run_outputs(run_dir: str | Path) -> list[str]:
+    """The names of :data:`RUN_OUTPUTS` present in ``run_dir`` (empty: it holds no run)."""
+    return [name for name in RUN_OUTPUTS if (Path(run_dir) / name).exists()]
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
@@ -151,3 +171,50 @@ def progress(total: int, description: str, enabled: bool = True):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=description, disable=not enabled, dynamic_ncols=True, leave=True)
+
+
+# --- the run log ---------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def logged_stage(stage: str, detail: str, jocc_iteration: int) -> Iterator[None]:
+    """Log one line when a stage starts and one when it ends, with its wall time (s).
+
+    ``detail`` says what the stage does, e.g. ``"π* for 40 PPO iterations"``."""
+    _log.info("JOCC iteration %d, stage %s: %s", jocc_iteration, stage, detail)
+    began = time.perf_counter()
+    yield
+    seconds = time.perf_counter() - began
+    _log.info("JOCC iteration %d, stage %s done in %.1f s", jocc_iteration, stage, seconds)
+
+
+def metrics_line(metrics: Mapping[str, Any], keys: Sequence[str]) -> str:
+    """``key=value`` for each of ``keys`` found in ``metrics`` (4 significant digits)."""
+
+    def fmt(value: Any) -> str:
+        return f"{value:.4g}" if isinstance(value, float) else str(value)
+
+    return ", ".join(f"{key}={fmt(metrics[key])}" for key in keys if key in metrics)
+
+
+class _PackageRecords(logging.Filter):
+    """Drops the package's records below WARNING (progress bars show that progress)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        package = record.name == LOGGER or record.name.startswith(LOGGER + ".")
+        return not package or record.levelno >= logging.WARNING
+
+
+def keep_log_off_console(progress: bool) -> None:
+    """With progress bars (``progress``), keep the package's INFO lines off the terminal
+    handlers of the root logger; files (Hydra's ``<command>.log``) still get them. Without
+    progress bars the terminal shows them instead (e.g. a SLURM job's output)."""
+    for handler in logging.getLogger().handlers:
+        if isinstance(handler, logging.FileHandler) or not isinstance(
+            handler, logging.StreamHandler
+        ):
+            continue
+        for old in [f for f in handler.filters if isinstance(f, _PackageRecords)]:
+            handler.removeFilter(old)
+        if progress:
+            handler.addFilter(_PackageRecords())

@@ -9,6 +9,7 @@ a :class:`CheckpointError` naming the file and the problem.
 from __future__ import annotations
 
 import io
+import logging
 import pickle
 import zipfile
 from pathlib import Path
@@ -16,7 +17,10 @@ from typing import Any
 
 import torch
 
+from vdtn_marl.config import LEARNED_RRA
 from vdtn_marl.runs import atomic_write_bytes
+
+_log = logging.getLogger(__name__)
 
 FORMAT = "vdtn-marl-checkpoint"
 FORMAT_VERSION = 1
@@ -39,6 +43,17 @@ class CheckpointError(ValueError):
     """A checkpoint that cannot be used; the message names the file and the problem."""
 
 
+class ShapeMismatch(CheckpointError):
+    """The config gives ``key`` another value than the checkpoint's run (``saved``)."""
+
+    def __init__(self, path: Path, key: str, saved: Any, given: Any):
+        super().__init__(
+            f"checkpoint {str(path)!r} was written with {key}={saved!r}, "
+            f"but the config has {key}={given!r}"
+        )
+        self.key, self.saved, self.given = key, saved, given
+
+
 def rng_state() -> dict[str, Any]:
     state = {"torch": torch.get_rng_state()}
     if torch.cuda.is_available() and torch.cuda.is_initialized():
@@ -56,7 +71,58 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     """Write ``payload`` (plus format tags) to ``path`` atomically."""
     buffer = io.BytesIO()
     torch.save({"format": FORMAT, "format_version": FORMAT_VERSION, **payload}, buffer)
-    return atomic_write_bytes(path, buffer.getvalue())
+    written = atomic_write_bytes(path, buffer.getvalue())
+    _log.info("checkpoint written: %s (%s)", written, describe(payload))
+    return written
+
+
+def trainer_iterations(payload: dict[str, Any]) -> dict[str, int]:
+    """PPO iterations each trainer of a checkpoint has run (0: never trained)."""
+    trainers = payload.get("trainers") or {}
+    return {name: int(state.get("iteration", 0)) for name, state in trainers.items()}
+
+
+def describe(payload: dict[str, Any]) -> str:
+    """One line on where a checkpoint's run stands: task, JOCC iteration, next stage, and
+    the PPO iterations of each trainer."""
+    parts = [f"task={payload.get('task')}"]
+    position = payload.get("position") or {}
+    if "iteration" in position:
+        where = f"JOCC iteration {position['iteration']}, next stage index {position.get('stage')}"
+        parts.append(where)
+    iterations = trainer_iterations(payload)
+    if iterations:
+        parts.append("PPO iterations " + ", ".join(f"{n}={i}" for n, i in iterations.items()))
+    return "; ".join(parts)
+
+
+_UNTRAINED = {
+    "pi_star": "π* was never trained",
+    "pi_tilde": "π̃ (control=learned) was never trained: its control metrics are those of its "
+    "initial weights",
+    "rra": "the RRA policy (rra={rra}) was never trained: a uniformly random allocation is "
+    "scored in its place (pass rra=random, round_robin or greedy to evaluate a baseline)",
+}
+
+
+def untrained_policies(payload: dict[str, Any], config: dict[str, Any]) -> tuple[list[str], bool]:
+    """Warnings for the learned policies an evaluation of ``payload`` under ``config`` (nested
+    dict) would score although the checkpoint never trained them, and whether no trained
+    policy would act at all (nothing of the checkpoint to evaluate).
+
+    A ``task=control`` checkpoint is evaluated as its run evaluated it: π* on perfect
+    observations. Otherwise π̃ acts when ``control.name`` is ``learned``, and the RRA agents
+    when ``rra.name`` is a learned method (an untrained RRA policy is replaced by a uniformly
+    random one, as during training)."""
+    acting = ["pi_star"]
+    if payload.get("task") != "control":
+        acting = ["pi_tilde"] if _lookup(config, "control.name") == "learned" else []
+        acting += ["rra"] if _lookup(config, "rra.name") in LEARNED_RRA else []
+    iterations = trainer_iterations(payload)
+    untrained = [name for name in acting if iterations.get(name, 0) == 0]
+    rra = _lookup(config, "rra.name")
+    warnings = [_UNTRAINED[name].format(rra=rra) for name in untrained]
+    return warnings, bool(acting) and len(untrained) == len(acting)
 
 
 def _lookup(config: dict[str, Any], dotted: str) -> Any:
@@ -76,9 +142,9 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, OSError) as err:
-        raise CheckpointError(
-            f"checkpoint {str(path)!r} is truncated or not a vdtn-marl checkpoint ({err})"
-        ) from err
+        # torch's own message is many lines and suggests weights_only=False (which would run
+        # the file's code): name the file and the problem only.
+        raise CheckpointError(_unreadable(path, err)) from err
     if not isinstance(payload, dict) or payload.get("format") != FORMAT:
         raise CheckpointError(f"checkpoint {str(path)!r} is not a vdtn-marl checkpoint")
     version = payload.get("format_version")
@@ -91,8 +157,21 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
         saved = payload.get("config", {})
         for key in SHAPE_KEYS:
             if _lookup(saved, key) != _lookup(config, key):
-                raise CheckpointError(
-                    f"checkpoint {str(path)!r} was written with {key}={_lookup(saved, key)!r}, "
-                    f"but the config has {key}={_lookup(config, key)!r}"
-                )
+                raise ShapeMismatch(path, key, _lookup(saved, key), _lookup(config, key))
     return payload
+
+
+def _unreadable(path: Path, err: BaseException) -> str:
+    """Why torch cannot read ``path``, in one line: a damaged torch archive, one holding other
+    objects than tensors and plain containers, or another kind of file."""
+    with open(path, "rb") as handle:
+        zipped = handle.read(4) == b"PK\x03\x04"  # the zip archive torch.save writes
+    name = repr(str(path))
+    if zipped and isinstance(err, pickle.UnpicklingError):
+        return (
+            f"checkpoint {name} is not a vdtn-marl checkpoint (a torch file holding objects "
+            "other than tensors and plain containers)"
+        )
+    if zipped:
+        return f"checkpoint {name} is truncated or damaged (its torch archive cannot be read)"
+    return f"checkpoint {name} is not a vdtn-marl checkpoint (not a file written by torch.save)"

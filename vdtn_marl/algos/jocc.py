@@ -49,7 +49,14 @@ from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
-from vdtn_marl.config import IVOI_ESTIMATORS, RunConfig, from_dict, to_dict, validate
+from vdtn_marl.config import (
+    IVOI_ESTIMATORS,
+    RunConfig,
+    from_dict,
+    to_dict,
+    validate,
+    validate_device,
+)
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
@@ -60,6 +67,7 @@ from vdtn_marl.runs import (
     MetricsLog,
     atomic_write_bytes,
     atomic_write_json,
+    logged_stage,
     progress,
 )
 from vdtn_marl.sim.cacc import CACCController
@@ -68,6 +76,12 @@ from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
+STAGE_POLICIES = {
+    "control_perfect": "π*",
+    "control_impaired": "π̃",
+    "rra": "the RRA agents",
+}
+"""Who a training stage trains (for the run log)."""
 TASK_STAGES = {
     "jocc": STAGES,
     "control": ("control_perfect", "evaluate"),
@@ -94,14 +108,16 @@ class SwitchablePolicy:
             self.policy.seed(seed)
 
 
-def trace_source(cfg: RunConfig, part: str) -> str | TraceSource:
-    """The scenario's leader traces; a user's file is split into train/eval parts."""
+def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]:
+    """The scenario's leader traces for training and for evaluation: a named trace set for
+    both, or a user's file divided into a train and an eval part
+    (:func:`~vdtn_marl.data.selection.file_sources`)."""
     scenario = cfg.scenario
     if scenario.trace_path is None:
-        return scenario.traces
-    from vdtn_marl.data.profiles import load_trace_source
+        return scenario.traces, scenario.traces
+    from vdtn_marl.data.selection import file_sources
 
-    return load_trace_source(scenario.traces, scenario.trace_path, part=part)
+    return file_sources(scenario.traces, scenario.trace_path)
 
 
 class JointOptimisation:
@@ -125,11 +141,10 @@ class JointOptimisation:
         self.control_learned = control.name == "learned"
         self.rra_learned = rra.learned
         self.gamma = algo.gamma
-        self.train_traces = train_traces = trace_source(cfg, "train")
-        self.eval_traces = trace_source(cfg, "eval")
+        self.train_traces, self.eval_traces = trace_sources(cfg)
         env_kw: dict[str, Any] = dict(
             batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
-            trace_source=train_traces, **cfg.scenario.model_kwargs(),
+            trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
         )  # fmt: skip
         cacc = CACCController(self.params.platoon)
 
@@ -348,15 +363,17 @@ class JointOptimisation:
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
         every = self.cfg.experiment.checkpoint_every
-        while trainer.iteration < end:
-            stats = trainer.train_iteration()
-            row = {"jocc_iteration": self.position["iteration"], "stage": stage}
-            row.update(stats.__dict__)
-            self.train_log.log(row, step=None)
-            bar.update(1)
-            bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
-            if every and trainer.iteration < end and trainer.iteration % every == 0:
-                self.save()
+        what = f"{STAGE_POLICIES[stage]} for {end - trainer.iteration} PPO iterations"
+        with logged_stage(stage, what, self.position["iteration"]):
+            while trainer.iteration < end:
+                stats = trainer.train_iteration()
+                row = {"jocc_iteration": self.position["iteration"], "stage": stage}
+                row.update(stats.__dict__)
+                self.train_log.log(row, step=None)
+                bar.update(1)
+                bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
+                if every and trainer.iteration < end and trainer.iteration % every == 0:
+                    self.save()
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
@@ -439,7 +456,10 @@ class JointOptimisation:
             while self.position["iteration"] < cfg.experiment.jocc_iterations:
                 stage = self.stages[self.position["stage"]]
                 if stage == "evaluate":
-                    self.evaluate()
+                    e = cfg.experiment
+                    what = f"{e.eval_episodes} episodes of {e.eval_intervals} intervals"
+                    with logged_stage(stage, what, self.position["iteration"]):
+                        self.evaluate()
                     bar.update(1)
                 else:
                     self._train_stage(stage, bar)
@@ -574,6 +594,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
     cfg.rra.kappa1 = args.kappa1
+    try:
+        validate(cfg)
+        validate_device(cfg.device)
+    except ConfigError as exc:
+        parser.error(str(exc))
     summary = JointOptimisation(cfg, args.run_dir).run()
     print(format_table(summary))
     print(f"outputs: {Path(args.run_dir).resolve()}")

@@ -34,6 +34,7 @@ from vdtn_marl.data.profiles import (
     ProfileTraceSource,
     load_profiles,
     load_trace_source,
+    load_train_eval_sources,
     split,
 )
 from vdtn_marl.data.traces import (
@@ -84,6 +85,7 @@ __all__ = [
     "load_profiles",
     "load_time_speed_csv",
     "load_trace_source",
+    "load_train_eval_sources",
     "preprocess",
     "preprocess_all",
     "register_trace_source",

@@ -205,15 +205,79 @@ def load_trace_source(
             f"{Path(path).name}: no {kind} profile left after selection, cleaning and "
             f"part={part!r}; loosen the selection (e.g. min_duration_s, speed_range_mps)"
         )
+    return _file_source(kind, path, profiles, f"part={part}, split v{SPLIT_VERSION}", too_short)
+
+
+def _file_source(
+    kind: str, path: str | Path, profiles: list[SpeedProfile], how: str, too_short: TooShort
+) -> ProfileTraceSource:
+    """A source over ``profiles`` read from ``path``; ``how`` says which part of the file."""
     info = TraceInfo(
         name=f"{kind}:{Path(path).name}",
-        description=f"{len(profiles)} {kind} speed profiles from {Path(path).name} "
-        f"(part={part}, split v{SPLIT_VERSION})",
+        description=f"{len(profiles)} {kind} speed profiles from {Path(path).name} ({how})",
         synthetic=False,
         source=profiles[0].source,
         license=FILE_LICENSES.get(kind, ""),
     )
     return ProfileTraceSource(profiles, info, too_short=too_short)
+
+
+TIME_SPLIT_TRAIN_FRACTION = 1.0 - 1.0 / EVAL_MODULUS
+"""The share of each profile's duration that trains when a file is split in time (0.8)."""
+
+
+def time_split(profile: SpeedProfile, part: Literal["train", "eval"]) -> SpeedProfile:
+    """The first 80 % of ``profile``'s duration (``"train"``) or its last 20 % (``"eval"``).
+
+    The two parts share only the sample nearest the cut; ids get a ``@train``/``@eval`` suffix.
+    """
+    if part not in ("train", "eval"):
+        raise ValueError(f"part={part!r} must be 'train' or 'eval'")
+    t = profile.time_s
+    cut_s = t[0] + TIME_SPLIT_TRAIN_FRACTION * profile.duration_s
+    at = int(np.argmin(np.abs(t - cut_s)))
+    keep = slice(0, at + 1) if part == "train" else slice(at, None)
+    return SpeedProfile(
+        t[keep], profile.speed_mps[keep], f"{profile.vehicle_id}@{part}", profile.source
+    )
+
+
+def load_train_eval_sources(
+    kind: str,
+    path: str | Path,
+    *,
+    too_short: TooShort = "raise",
+    clean: bool = True,
+    preprocess_kw: dict[str, Any] | None = None,
+    **loader_kw: Any,
+) -> tuple[ProfileTraceSource, ProfileTraceSource]:
+    """Training and evaluation sources from one file, read once (arguments as in
+    :func:`load_trace_source`).
+
+    Profiles are divided by the split rule (:func:`split`). When every profile lands in the
+    same part (a file with one vehicle, say), each profile is split in time instead
+    (:func:`time_split`: its first 80 % trains, its last 20 % evaluates), so that evaluation
+    still never sees the stretch of road it was trained on.
+    """
+    profiles = load_profiles(
+        kind, path, part="all", clean=clean, preprocess_kw=preprocess_kw, **loader_kw
+    )
+    if not profiles:
+        raise ValueError(
+            f"{Path(path).name}: no {kind} profile left after selection and cleaning; "
+            "loosen the selection (e.g. min_duration_s, speed_range_mps)"
+        )
+    parts = {part: split(profiles, part) for part in ("train", "eval")}
+    how = f"split v{SPLIT_VERSION}"
+    if not parts["train"] or not parts["eval"]:
+        parts = {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}
+        how = f"first {TIME_SPLIT_TRAIN_FRACTION:.0%} / last {1 - TIME_SPLIT_TRAIN_FRACTION:.0%}"
+        how += " of each profile's duration"
+    train, evaluation = (
+        _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
+        for part in ("train", "eval")
+    )
+    return train, evaluation
 
 
 class NGSIMTraceSource(ProfileTraceSource):

@@ -7,6 +7,7 @@ The environments are thin: they translate between PettingZoo's dicts and the twi
 from __future__ import annotations
 
 import functools
+import numbers
 
 import gymnasium
 import numpy as np
@@ -17,7 +18,7 @@ from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.sim.link import RRA_OBS_GAIN_CLIP
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
-from vdtn_marl.sim.twin import RRA_CONTROL_CLIP, DigitalTwin, IntervalRecord
+from vdtn_marl.sim.twin import RRA_CONTROL_CLIP, DigitalTwin, IntervalRecord, resolve_device
 
 RENDER_MODES = ("rgb_array",)
 
@@ -62,12 +63,13 @@ def rra_action_space(twin: DigitalTwin) -> gymnasium.spaces.Discrete:
 
 def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
     """κ1, κ2 ∈ [0, 1] with κ1 + κ2 = 1; κ2 defaults to 1 − κ1."""
-    if not (isinstance(kappa1, int | float) and 0.0 <= kappa1 <= 1.0):
-        raise ConfigError(f"kappa1={kappa1!r} is outside the allowed range [0, 1]")
-    if kappa2 is None:
-        kappa2 = 1.0 - kappa1
-    if not (isinstance(kappa2, int | float) and 0.0 <= kappa2 <= 1.0):
-        raise ConfigError(f"kappa2={kappa2!r} is outside the allowed range [0, 1]")
+    for name, value in (("kappa1", kappa1), ("kappa2", kappa2)):
+        if name == "kappa2" and value is None:
+            kappa2 = value = 1.0 - kappa1
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            raise ConfigError(f"{name}={value!r} must be a number in [0, 1]")
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f"{name}={value!r} is outside the allowed range [0, 1]")
     if abs(kappa1 + kappa2 - 1.0) > KAPPA_SUM_ABS_TOL:
         raise ConfigError(
             f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})"
@@ -99,7 +101,7 @@ class VDTNParallelEnv(ParallelEnv):
             raise ConfigError(f"render_mode={render_mode!r} must be None or one of {RENDER_MODES}")
         self.render_mode = render_mode
         params = TwinParams.from_overrides(**model_kwargs)
-        backend = "numpy" if torch.device(device).type == "cpu" else "torch"
+        backend = "numpy" if resolve_device(device).type == "cpu" else "torch"
         self.twin = DigitalTwin(
             params,
             batch_size=1,

@@ -8,7 +8,9 @@ to change. Units are in the field names (``_m``, ``_s``, ``_mps``, ``_mps2``, ``
 from __future__ import annotations
 
 import math
+import numbers
 from dataclasses import asdict, dataclass, field, fields
+from typing import Any
 
 
 class ConfigError(ValueError):
@@ -18,6 +20,26 @@ class ConfigError(ValueError):
 KAPPA_SUM_ABS_TOL = 1e-6
 """How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
 config validation and the environments."""
+
+
+def _check_types(params: Any) -> None:
+    """Every ``int`` field holds an integer and every ``float`` field a real number (bools,
+    strings and None are refused, naming the key)."""
+    for f in fields(params):
+        value = getattr(params, f.name)
+        if f.type == "int":
+            ok, kind = isinstance(value, numbers.Integral), "an integer"
+        elif f.type == "float":
+            ok, kind = isinstance(value, numbers.Real), "a number"
+        elif f.type.startswith("tuple[float"):
+            ok = isinstance(value, tuple) and all(
+                isinstance(v, numbers.Real) and not isinstance(v, bool) for v in value
+            )
+            kind = "a list of numbers"
+        else:
+            continue
+        if not ok or isinstance(value, bool):
+            raise ConfigError(f"{f.name}={value!r} must be {kind}")
 
 
 def _check_range(name: str, value: float, low: float, high: float, *, low_open=False) -> None:
@@ -63,6 +85,7 @@ class PlatoonParams:
         return 2.0 * self.accel_max_mps2 / self.control_interval_s
 
     def validate(self) -> None:
+        _check_types(self)
         if not 2 <= self.num_vehicles <= 64:
             raise ConfigError(f"num_vehicles={self.num_vehicles!r} is outside [2, 64]")
         if not 1 <= self.subframes_per_interval <= 1000:
@@ -125,6 +148,7 @@ class RadioParams:
         return self.noise_density_dbm_hz + 10.0 * math.log10(self.subchannel_bandwidth_hz)
 
     def validate(self) -> None:
+        _check_types(self)
         if not 1 <= self.num_subchannels <= 64:
             raise ConfigError(f"num_subchannels={self.num_subchannels!r} is outside [1, 64]")
         _check_range(
@@ -160,6 +184,7 @@ class TwinParams:
     def validate(self) -> TwinParams:
         self.platoon.validate()
         self.radio.validate()
+        _check_types(self)
         if not 1 <= self.episode_intervals <= 10_000_000:
             raise ConfigError(
                 f"episode_intervals={self.episode_intervals!r} is outside [1, 10000000]"

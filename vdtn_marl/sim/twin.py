@@ -93,15 +93,33 @@ class IntervalRecord:
 
 
 def resolve_device(device: str | torch.device) -> torch.device:
-    """Validate a device string; a CUDA device where none exists is a clear error."""
-    try:
-        dev = torch.device(device)
-    except (RuntimeError, TypeError) as err:
-        raise ConfigError(
-            f"device={device!r} is not a valid torch device ('cpu', 'cuda', 'cuda:0')"
-        ) from err
-    if dev.type == "cuda" and not torch.cuda.is_available():
-        raise ConfigError(f"device={device!r} requested but CUDA is not available; use 'cpu'")
+    """The torch device of ``device`` if it can be used here (cpu, cuda, cuda:N); otherwise a
+    :class:`ConfigError` naming the value and what is allowed on this machine."""
+    if isinstance(device, torch.device):
+        dev = device
+    else:
+        if not isinstance(device, str) or not device:
+            raise ConfigError(f"device={device!r} is not allowed; use cpu, cuda or cuda:N")
+        try:
+            dev = torch.device(device)
+        except (RuntimeError, ValueError):
+            raise ConfigError(
+                f"device={device!r} is not a torch device; use cpu, cuda or cuda:N"
+            ) from None
+    if dev.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ConfigError(
+                f"device={device!r} is not available: torch.cuda.is_available() is False on "
+                "this machine (a CPU-only torch build, or no GPU); allowed: cpu"
+            )
+        count = torch.cuda.device_count()
+        if dev.index is not None and dev.index >= count:
+            raise ConfigError(
+                f"device={device!r} is not available: this machine has {count} CUDA "
+                f"device(s); allowed: cpu, cuda, cuda:0..cuda:{count - 1}"
+            )
+    elif dev.type != "cpu":
+        raise ConfigError(f"device={device!r} is not supported; use cpu, cuda or cuda:N")
     return dev
 
 

@@ -1,0 +1,183 @@
+"""Bad or unusual input outside the Hydra schema: trace settings, trace files, model keyword
+types, devices and the small command-line tools. Each error names the value and what is allowed.
+"""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+import vdtn_marl
+from vdtn_marl import cli
+from vdtn_marl.algos.jocc import trace_sources
+from vdtn_marl.config import RunConfig, validate
+from vdtn_marl.data.cycles import cycles_available
+from vdtn_marl.data.profiles import load_train_eval_sources
+from vdtn_marl.sim.params import ConfigError
+from vdtn_marl.sim.twin import resolve_device
+
+
+def _write_trace(path, duration_s=120.0, vehicles=("",)):
+    """A ``time,speed`` CSV (one vehicle) of 0.1 s samples, speeds in m/s."""
+    t = np.arange(0.0, duration_s + 1e-9, 0.1)
+    v = 20.0 + 3.0 * np.sin(t / 7.0)
+    rows = "\n".join(f"{a:.1f},{b:.4f}" for a, b in zip(t, v, strict=True))
+    path.write_text("time,speed\n" + rows + "\n")
+    return path
+
+
+def _cfg(**scenario):
+    cfg = RunConfig()
+    return replace(cfg, scenario=replace(cfg.scenario, **scenario))
+
+
+# ------------------------------------------------------------------------------ trace files
+
+
+def test_a_single_vehicle_csv_is_split_in_time(tmp_path):
+    path = _write_trace(tmp_path / "drive.csv")
+    train, evaluation = load_train_eval_sources("csv", path)
+    (p_train,), (p_eval,) = train.profiles, evaluation.profiles
+    assert p_train.time_s[-1] <= p_eval.time_s[0] + 1e-9  # evaluation follows training
+    assert p_train.duration_s == pytest.approx(0.8 * 120.0, abs=0.1)
+    assert p_eval.duration_s == pytest.approx(0.2 * 120.0, abs=0.1)
+    assert "first 80% / last 20%" in evaluation.info.description
+    # and a run config that names the file uses the same two parts
+    cfg = validate(_cfg(traces="csv", trace_path=str(path)))
+    run_train, run_eval = trace_sources(cfg)
+    assert run_train.profiles[0].duration_s == p_train.duration_s
+    assert run_eval.profiles[0].duration_s == p_eval.duration_s
+
+
+def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch):
+    # us101/2 is an eval vehicle and us101/7 a training one (tests/data/test_data_profiles.py)
+    from vdtn_marl.data import profiles as profiles_module
+    from vdtn_marl.data.loaders import SpeedProfile
+
+    t = np.arange(0.0, 60.0, 0.1)
+    fake = [SpeedProfile(t, 20.0 + 0 * t, vid, "fake") for vid in ("us101/2", "us101/7")]
+    monkeypatch.setattr(profiles_module, "load_profiles", lambda *a, **k: list(fake))
+    train, evaluation = load_train_eval_sources("csv", "unused.csv")
+    assert [p.vehicle_id for p in train.profiles] == ["us101/7"]
+    assert [p.vehicle_id for p in evaluation.profiles] == ["us101/2"]
+
+
+@pytest.mark.parametrize(
+    "scenario, fragment",
+    [
+        (dict(traces="foo"), "scenario.traces='foo' is not a known trace set"),
+        (dict(traces="csv"), "scenario.traces='csv' reads a file"),
+        (dict(trace_path="drive.csv"), "scenario.traces='synthetic' cannot read"),
+        (dict(traces="csv", trace_path="no/such.csv"), "scenario.trace_path='no/such.csv'"),
+        (dict(traces="csv", trace_path="bad.csv"), "bad.csv row 3: time 1 s is earlier"),
+        (dict(traces="ngsim", trace_path="drive.csv"), "(ngsim)"),
+    ],
+)
+def test_bad_trace_settings_are_config_errors(scenario, fragment, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    _write_trace(tmp_path / "drive.csv")
+    (tmp_path / "bad.csv").write_text("time,speed\n0,10\n2,10\n1,10\n")
+    with pytest.raises(ConfigError) as info:
+        validate(_cfg(**scenario))
+    assert fragment in str(info.value)
+
+
+@pytest.mark.skipif(cycles_available(), reason="the data extra is installed")
+def test_driving_cycle_without_the_data_extra_says_how_to_install_it():
+    with pytest.raises(ConfigError, match=r"pip install 'vdtn-marl\[data\]'"):
+        validate(_cfg(traces="udds"))
+
+
+@pytest.mark.parametrize(
+    "overrides, key",
+    [
+        (["scenario.traces=foo"], "scenario.traces='foo'"),
+        (["scenario.traces=csv", "scenario.trace_path=no_such.csv"], "scenario.trace_path"),
+        (["train", "task=rra", "rra=greedy"], "task=rra"),
+    ],
+)
+def test_cli_refuses_bad_traces_and_tasks_in_one_line_and_writes_nothing(
+    overrides, key, tmp_path, monkeypatch, capsys
+):
+    monkeypatch.chdir(tmp_path)
+    command = overrides[0] if overrides[0] == "train" else "jocc"
+    rest = overrides[1:] if command == "train" else overrides
+    assert cli.main([command, *rest]) == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("error: ") and key in lines[0], lines
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_task_rra_needs_a_learned_rra_method():
+    cfg = RunConfig(task="rra")
+    for name in ("random", "round_robin", "greedy"):
+        with pytest.raises(ConfigError, match=f"rra={name} has nothing to learn"):
+            validate(replace(cfg, rra=replace(cfg.rra, name=name)))
+    validate(replace(cfg, rra=replace(cfg.rra, name="drra")))
+    validate(replace(cfg, task="control", rra=replace(cfg.rra, name="greedy")))
+
+
+# ------------------------------------------------------------------ model keywords, devices
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(num_vehicles=4.5), "num_vehicles=4.5 must be an integer"),
+        (dict(num_vehicles="4"), "num_vehicles='4' must be an integer"),
+        (dict(num_vehicles=True), "num_vehicles=True must be an integer"),
+        (dict(carrier_ghz="2"), "carrier_ghz='2' must be a number"),
+        (dict(v2v_power_levels_dbm=[23, "x"]), "v2v_power_levels_dbm=(23, 'x') must be"),
+        (dict(episode_intervals=None), "episode_intervals=None must be an integer"),
+        (dict(kappa1="a"), "kappa1='a' must be a number in [0, 1]"),
+        (dict(device="foo"), "device='foo' is not a torch device"),
+        (dict(device="mps"), "device='mps' is not supported"),
+    ],
+)
+def test_make_names_the_bad_keyword(kwargs, message):
+    with pytest.raises(ConfigError) as info:
+        vdtn_marl.make("vdtn/vdtn-joint-v0", **kwargs)
+    assert message in str(info.value)
+
+
+def test_make_accepts_numpy_scalars():
+    env = vdtn_marl.make(
+        "vdtn/platoon-control-v0", num_vehicles=np.int64(5), driveline_lag_s=np.float32(0.2)
+    )
+    assert env.twin.num_followers == 4
+
+
+def test_resolve_device_names_cpu_or_the_missing_cuda():
+    assert resolve_device("cpu").type == "cpu"
+    import torch
+
+    if not torch.cuda.is_available():
+        with pytest.raises(ConfigError, match="device='cuda' is not available.*allowed: cpu"):
+            resolve_device("cuda")
+
+
+# ---------------------------------------------------------------------- small CLI tools
+
+
+@pytest.mark.parametrize(
+    "argv, fragment",
+    [(["--kappa1", "2"], "kappa1=2.0 is outside"), (["--device", "foo"], "device='foo'")],
+)
+def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
+    from vdtn_marl.rollout import main
+
+    with pytest.raises(SystemExit) as info:
+        main(argv)
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert fragment in err and "Traceback" not in err
+
+
+def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
+    from vdtn_marl.algos.jocc import main
+
+    with pytest.raises(SystemExit) as info:
+        main(["--kappa1", "2", "--run-dir", str(tmp_path / "run")])
+    assert info.value.code == 2
+    assert "rra.kappa1=2.0 is outside" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()
