@@ -317,6 +317,23 @@ def test_a_file_that_is_not_a_checkpoint_is_one_line(tmp_path, monkeypatch, caps
     assert "weights_only" not in line
 
 
+def test_a_checkpoint_the_system_will_not_let_us_read_is_one_line(tmp_path, monkeypatch):
+    import builtins
+
+    from vdtn_marl.algos import checkpoint
+
+    path = tmp_path / "last.pt"
+    path.write_bytes(b"PK\x03\x04 whatever")
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(checkpoint.torch, "load", refuse)
+    monkeypatch.setattr(builtins, "open", refuse)
+    with pytest.raises(checkpoint.CheckpointError, match="cannot be read \\(Permission denied\\)"):
+        checkpoint.load_checkpoint(path)
+
+
 def test_a_run_folder_without_a_checkpoint_is_named_as_such(tmp_path, monkeypatch, capsys):
     (tmp_path / "run").mkdir()
     monkeypatch.chdir(tmp_path)

@@ -163,10 +163,14 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
 
 def _unreadable(path: Path, err: BaseException) -> str:
     """Why torch cannot read ``path``, in one line: a damaged torch archive, one holding other
-    objects than tensors and plain containers, or another kind of file."""
-    with open(path, "rb") as handle:
-        zipped = handle.read(4) == b"PK\x03\x04"  # the zip archive torch.save writes
+    objects than tensors and plain containers, another kind of file, or one the system does
+    not let us read."""
     name = repr(str(path))
+    try:
+        with open(path, "rb") as handle:
+            zipped = handle.read(4) == b"PK\x03\x04"  # the zip archive torch.save writes
+    except OSError as exc:
+        return f"checkpoint {name} cannot be read ({exc.strerror or exc})"
     if zipped and isinstance(err, pickle.UnpicklingError):
         return (
             f"checkpoint {name} is not a vdtn-marl checkpoint (a torch file holding objects "
