@@ -115,14 +115,21 @@ class MetricsLog:
     ):
         self.path = Path(run_dir) / filename
         self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
-        self._writer = None
-        if tensorboard:
+        self._run_dir = Path(run_dir)
+        self._tensorboard = tensorboard
+        self._writer = None  # opened on the first scalar: a run that logs none has no folder
+
+    def _scalar_writer(self):
+        """The TensorBoard writer, opened on first use; None when tensorboard is off or not
+        installed."""
+        if self._writer is None and self._tensorboard:
             try:
                 from torch.utils.tensorboard import SummaryWriter
-
-                self._writer = SummaryWriter(log_dir=str(Path(run_dir) / "tensorboard"))
             except ImportError:  # tensorboard is optional
-                self._writer = None
+                self._tensorboard = False
+                return None
+            self._writer = SummaryWriter(log_dir=str(self._run_dir / "tensorboard"))
+        return self._writer
 
     @classmethod
     def resume(
@@ -138,10 +145,15 @@ class MetricsLog:
 
     def log(self, row: Mapping[str, Any], step: int | None = None) -> None:
         self.rows.append(dict(row))
-        if self._writer is not None and step is not None:
-            for key, value in row.items():
-                if isinstance(value, int | float) and not isinstance(value, bool):
-                    self._writer.add_scalar(key, value, step)
+        scalars = {
+            key: value
+            for key, value in row.items()
+            if isinstance(value, int | float) and not isinstance(value, bool)
+        }
+        writer = self._scalar_writer() if step is not None and scalars else None
+        if writer is not None:
+            for key, value in scalars.items():
+                writer.add_scalar(key, value, step)
         self.flush()
 
     def truncate(self, keep: int) -> None:
