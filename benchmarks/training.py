@@ -47,6 +47,7 @@ from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.benchmarking import parse_names, parse_seeds
 from vdtn_marl.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.data import trace_source_names
+from vdtn_marl.data.selection import named_sources
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import atomic_write_json, progress, script_command
 from vdtn_marl.sim.cacc import CACCController
@@ -138,7 +139,7 @@ def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: 
             device=args.device,
             seed=seed,
             episode_intervals=ScenarioConfig().episode_intervals,
-            trace_source=args.traces,
+            trace_source=named_sources(args.traces)[0],
         ),
         "vehicle",
         algo,
@@ -151,7 +152,11 @@ def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: 
         teacher = make_control_baseline("causal_mpc", params)
         with progress(distillation_ticks(), f"imitating the causal MPC (seed {seed})") as bar:
             stats = distill_teacher(
-                learner, teacher, params, trace_source=args.traces, progress=bar.update
+                learner,
+                teacher,
+                params,
+                trace_source=named_sources(args.traces)[0],
+                progress=bar.update,
             )
             distilled = asdict(stats)
     learner.begin_stage(args.iterations)  # for --lr-schedule and --validate-every
@@ -236,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
     params = TwinParams.from_overrides(episode_intervals=max(args.intervals, 200))
     common = dict(
         perfect=True, episodes=args.episodes, intervals=args.intervals, seed=10**9 + args.seed,
-        device=args.device, trace_source=args.traces,
+        device=args.device, trace_source=named_sources(args.traces)[1],
     )  # fmt: skip
     # the exact oracle optimises exactly the evaluated intervals
     exact_horizon = {"horizon_intervals": args.intervals}

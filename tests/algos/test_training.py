@@ -9,6 +9,7 @@ import vdtn_marl
 from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import JointOptimisation
+from vdtn_marl.algos.networks import scalers
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.config import (
     AlgoConfig,
@@ -19,7 +20,8 @@ from vdtn_marl.config import (
     to_dict,
 )
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.twin import RRA_CONTROL_FEATURES
 from vdtn_marl.voi import TDIVoIEstimator
 
 TINY_ALGO = AlgoConfig(
@@ -364,3 +366,33 @@ def test_jocc_hands_the_configured_ivoi_baseline_to_the_rra_environment(tmp_path
     at_close = reward[:, closing]
     assert (at_close != 0).any() and (at_close == 0).any()  # delivered and lost CAMs
     assert loop.ivoi_estimator("rollout").baseline == "optimal"  # the default
+
+
+def test_rra_observation_scaling_keeps_mid_episode_control_errors_in_range(tmp_path):
+    """The RRA scaler is fitted on a rollout of a few subframes; from a reset alone the
+    followers' control errors in the RRA observation barely move there, and their scaled
+    values on mid-episode states came out ~30× their spread. The fit also sees mid-episode
+    states, so those features stay on the scale of the others."""
+    loop = JointOptimisation(tiny_config(), tmp_path)
+    trainer = loop.rra
+    trainer.fit_observation_scaling()
+    env = trainer.env
+    with env.burned_in(30):  # states the fit did not see (other scenarios, another interval)
+        env.set_seed(12345)
+        observation = env.reset().get(("rra", "observation"))
+    scaler = scalers(trainer.actor)[0]
+    control = slice(-RRA_CONTROL_FEATURES, None)
+    z = scaler(observation)[..., control]
+    rms = z.pow(2).mean(dim=(0, 1)).sqrt()  # per feature
+    assert (rms < 3.0).all(), rms
+    assert float(env.twin.interval[0]) == 30
+
+
+def test_burned_in_is_refused_outside_rra_mode_and_range(tmp_path):
+    loop = JointOptimisation(tiny_config(), tmp_path)
+    with pytest.raises(ConfigError, match=r"intervals=40 must be in \[0, 39\]"):
+        with loop.rra.env.burned_in(40):
+            pass
+    with pytest.raises(ConfigError, match="only used with mode='rra'"):
+        with loop.pi_star.env.burned_in(3):
+            pass

@@ -23,7 +23,8 @@ from vdtn_marl.runs import atomic_write_bytes
 _log = logging.getLogger(__name__)
 
 FORMAT = "vdtn-marl-checkpoint"
-FORMAT_VERSION = 1
+#: 2: a shared centralised critic has one output per agent (format 1 had one for all).
+FORMAT_VERSION = 2
 
 #: Config keys a checkpoint's networks depend on; resuming or evaluating with other values is
 #: refused (everything else, e.g. budgets, may change between runs).
@@ -151,7 +152,8 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
     if version != FORMAT_VERSION:
         raise CheckpointError(
             f"checkpoint {str(path)!r} has format_version={version!r}; "
-            f"this vdtn-marl reads format_version={FORMAT_VERSION}"
+            f"this vdtn-marl reads format_version={FORMAT_VERSION} (the networks changed: "
+            "train the run again with this version)"
         )
     if config is not None:
         saved = payload.get("config", {})

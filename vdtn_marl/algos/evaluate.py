@@ -32,7 +32,8 @@ class EvalResult:
     """Per-scenario returns (for paired statistics) and aggregate metrics of one evaluation.
 
     ``returns`` [B]: discounted control return, mean over followers. ``ivoi_sums`` [B]:
-    Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given). ``ivoi_delivered``
+    Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given; its expectation is
+    the EVoI for the ``td`` estimator, not for ``rollout``, docs/model.md §5). ``ivoi_delivered``
     and ``ivoi_lost`` [B] (IVoI estimator and radio): per scenario, the mean ξ over the
     follower-intervals whose CAM was delivered within its interval / was not (NaN where there
     were none). Under an RRA policy whose deliveries do not depend on the platoon's state

@@ -109,14 +109,15 @@ class SwitchablePolicy:
 
 
 def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]:
-    """The scenario's leader traces for training and for evaluation: a named trace set for
-    both, or a user's file divided into a train and an eval part
+    """The scenario's leader traces for training and for evaluation: a named trace set
+    (:func:`~vdtn_marl.data.selection.named_sources`: a recorded one split in time) or a
+    user's file divided into a train and an eval part
     (:func:`~vdtn_marl.data.selection.file_sources`)."""
+    from vdtn_marl.data.selection import file_sources, named_sources
+
     scenario = cfg.scenario
     if scenario.trace_path is None:
-        return scenario.traces, scenario.traces
-    from vdtn_marl.data.selection import file_sources
-
+        return named_sources(scenario.traces)
     return file_sources(scenario.traces, scenario.trace_path)
 
 

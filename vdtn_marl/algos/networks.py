@@ -5,7 +5,10 @@
   m/s²) use a TanhNormal bounded to the action range with a state-independent scale; discrete
   groups (``rra``: sub-channel × power level) use a Categorical over logits.
 - Critic: observation scaling → MultiAgentMLP with ``centralized=True`` for MAPPO (every agent's
-  value sees the whole group's observations: CTDE) or ``False`` for IPPO.
+  value sees the whole group's observations: CTDE) or ``False`` for IPPO. Agents have their own
+  rewards (each follower its own cost, each RRA agent its own follower's IVoI), so a shared
+  centralised critic has one output per agent (:class:`OwnValue`) rather than one value that
+  TorchRL would copy to every agent.
 ``share_params`` makes one network serve every agent of the group.
 
 Observations are standardised inside the networks (:class:`ObservationScaler`): first with the
@@ -68,6 +71,18 @@ class ObservationScaler(nn.Module):
 
     def forward(self, observation: torch.Tensor) -> torch.Tensor:
         return (observation - self.center) * self.scale
+
+
+class OwnValue(nn.Module):
+    """[..., n_agents, n_agents] → [..., n_agents, 1]: agent i keeps output i.
+
+    A centralised MultiAgentMLP with shared parameters gives every agent the same output
+    vector (one network on the same joined input); with ``n_agents`` outputs, output i is
+    agent i's value, so a shared critic still has one value per agent.
+    """
+
+    def forward(self, values: torch.Tensor) -> torch.Tensor:
+        return values.diagonal(dim1=-2, dim2=-1).unsqueeze(-1)
 
 
 def scalers(module: nn.Module) -> list[ObservationScaler]:
@@ -233,7 +248,15 @@ def make_critic(
     """State-value network of ``group``; writes ``(group, "state_value")`` [..., n_agents, 1]."""
     n_agents, n_obs = group_shape(observation_spec, group)
     scaler = _scaler(observation_spec, group, ()).to(device)
-    body = _group_mlp(n_obs, 1, n_agents, centralised, share_params, depth, num_cells, device)
+    if centralised and share_params:
+        # one network on the joined observations, one output per agent: agents have their
+        # own rewards, so their values differ (TorchRL would copy one output to every agent)
+        body = nn.Sequential(
+            _group_mlp(n_obs, n_agents, n_agents, True, True, depth, num_cells, device),
+            OwnValue(),
+        )
+    else:
+        body = _group_mlp(n_obs, 1, n_agents, centralised, share_params, depth, num_cells, device)
     return TensorDictModule(
         nn.Sequential(scaler, body),
         in_keys=[(group, "observation")],

@@ -44,6 +44,7 @@ SEED_STRIDE = 1_000_003
 #: training iteration's.
 SCALING_ITERATION = SEED_STRIDE - 1
 VALIDATION_ITERATION = SEED_STRIDE - 2
+SCALING_MID_EPISODE_ITERATION = SEED_STRIDE - 4  # -3: imitation's DISTILLATION_ITERATION
 
 
 @dataclass
@@ -168,9 +169,18 @@ class PPOTrainer:
 
     def fit_observation_scaling(self) -> None:
         """Standardise observations with statistics of one rollout of the initial policy
-        (scenarios seeded apart from the training iterations)."""
-        data = self.collect(iteration=SCALING_ITERATION)
-        observations = data.get((self.group, "observation"))
+        (scenarios seeded apart from the training iterations).
+
+        An RRA rollout is a few subframes long: from a reset alone its followers' control
+        errors are near zero, and scaling by that spread would blow them up ~100× on the
+        mid-episode states of evaluation. So RRA statistics also take a rollout from
+        mid-episode (:meth:`VDTNTorchRLEnv.burned_in`).
+        """
+        observations = self.collect(iteration=SCALING_ITERATION).get((self.group, "observation"))
+        if getattr(self.env, "mode", None) == "rra":
+            with self.env.burned_in(self.env.twin.params.episode_intervals // 2):
+                later = self.collect(iteration=SCALING_MID_EPISODE_ITERATION)
+            observations = torch.cat([observations, later.get((self.group, "observation"))])
         for scaler in scalers(self.actor) + scalers(self.critic):
             scaler.fit_(observations)
         self.scaling_fitted = True

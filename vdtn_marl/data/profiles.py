@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import re
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
 
@@ -224,6 +225,10 @@ def _file_source(
 
 TIME_SPLIT_TRAIN_FRACTION = 1.0 - 1.0 / EVAL_MODULUS
 """The share of each profile's duration that trains when a file is split in time (0.8)."""
+TIME_SPLIT_HOW = (
+    f"first {TIME_SPLIT_TRAIN_FRACTION:.0%} / last {1 - TIME_SPLIT_TRAIN_FRACTION:.0%}"
+    " of each profile's duration"
+)
 
 
 def time_split(profile: SpeedProfile, part: Literal["train", "eval"]) -> SpeedProfile:
@@ -240,6 +245,22 @@ def time_split(profile: SpeedProfile, part: Literal["train", "eval"]) -> SpeedPr
     return SpeedProfile(
         t[keep], profile.speed_mps[keep], f"{profile.vehicle_id}@{part}", profile.source
     )
+
+
+def time_split_sources(
+    source: ProfileTraceSource,
+) -> tuple[ProfileTraceSource, ProfileTraceSource]:
+    """Training and evaluation sources of a recorded trace set: the first 80 % and the last
+    20 % of each of its profiles' duration (:func:`time_split`), so that evaluation windows
+    never replay a stretch that training drew from."""
+    parts = []
+    for part in ("train", "eval"):
+        info = replace(
+            source.info, description=f"{source.info.description} (part={part}, {TIME_SPLIT_HOW})"
+        )
+        profiles = [time_split(p, part) for p in source.profiles]
+        parts.append(ProfileTraceSource(profiles, info, too_short=source.too_short))
+    return parts[0], parts[1]
 
 
 def load_train_eval_sources(
@@ -271,8 +292,7 @@ def load_train_eval_sources(
     how = f"split v{SPLIT_VERSION}"
     if not parts["train"] or not parts["eval"]:
         parts = {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}
-        how = f"first {TIME_SPLIT_TRAIN_FRACTION:.0%} / last {1 - TIME_SPLIT_TRAIN_FRACTION:.0%}"
-        how += " of each profile's duration"
+        how = TIME_SPLIT_HOW
     train, evaluation = (
         _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
         for part in ("train", "eval")

@@ -1,10 +1,12 @@
 """Which leader traces a run uses: ``scenario.traces`` and ``scenario.trace_path`` checked up
 front, and the training and evaluation sources they select.
 
-A named trace set (``synthetic``, ``constant``, ``udds``, ...) serves training and evaluation
-alike (their scenarios are seeded apart); a user's file (``scenario.traces=csv|highd|ngsim``
-with ``scenario.trace_path``) is read once and divided into a train and an eval part
-(:func:`~vdtn_marl.data.profiles.load_train_eval_sources`).
+A generated trace set (``synthetic``, ``constant``) serves training and evaluation alike
+(their scenarios are seeded apart, so evaluation draws traces training never saw); a recorded
+one (``udds``, ``hwfet``: one drive each) is split in time, its first 80 % for training and
+its last 20 % for evaluation (:func:`named_sources`); a user's file
+(``scenario.traces=csv|highd|ngsim`` with ``scenario.trace_path``) is read once and divided
+into a train and an eval part (:func:`~vdtn_marl.data.profiles.load_train_eval_sources`).
 """
 
 from __future__ import annotations
@@ -14,8 +16,12 @@ from pathlib import Path
 
 from vdtn_marl.data.cycles import CYCLES
 from vdtn_marl.data.loaders import LOADERS
-from vdtn_marl.data.profiles import ProfileTraceSource, load_train_eval_sources
-from vdtn_marl.data.traces import trace_source_names
+from vdtn_marl.data.profiles import (
+    ProfileTraceSource,
+    load_train_eval_sources,
+    time_split_sources,
+)
+from vdtn_marl.data.traces import TraceSource, get_trace_source, trace_source_names
 from vdtn_marl.sim.params import ConfigError
 
 FILE_FORMATS = tuple(sorted(LOADERS))
@@ -51,6 +57,17 @@ def check_trace_settings(traces: str, trace_path: str | None) -> None:
             f"with a trace file set scenario.traces to its format: {', '.join(FILE_FORMATS)}"
         )
     file_sources(traces, trace_path)
+
+
+def named_sources(name: str) -> tuple[str | TraceSource, str | TraceSource]:
+    """Training and evaluation sources of the named trace set ``name``: the name itself for
+    both when its traces are generated, the two time parts of a recorded set
+    (:func:`~vdtn_marl.data.profiles.time_split_sources`), which would otherwise evaluate on
+    windows of the drive it trained on."""
+    source = get_trace_source(name)
+    if isinstance(source, ProfileTraceSource):
+        return time_split_sources(source)
+    return name, name
 
 
 def file_sources(kind: str, trace_path: str) -> tuple[ProfileTraceSource, ProfileTraceSource]:

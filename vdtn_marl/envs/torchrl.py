@@ -28,7 +28,8 @@ joins the batch at the current subframe: its first interval is shorter.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import contextlib
+from collections.abc import Callable, Iterator, Sequence
 
 import torch
 from tensordict import TensorDict, TensorDictBase
@@ -195,6 +196,7 @@ class VDTNTorchRLEnv(EnvBase):
                 f"[0, {params.episode_intervals - 1}] (episode_intervals − 1)"
             )
         self.burn_in_intervals = burn_in_intervals
+        self._burn_in_exact: int | None = None  # set by burned_in()
         self._bandwidth_hz = params.radio.subchannel_bandwidth_hz
         self._subframe_s = pp.subframe_s
         self._vehicle_obs: torch.Tensor | None = None
@@ -337,6 +339,23 @@ class VDTNTorchRLEnv(EnvBase):
             actions = policy(twin.rra_observation())
             twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
 
+    @contextlib.contextmanager
+    def burned_in(self, intervals: int) -> Iterator[None]:
+        """Inside the block, a full reset drives every scenario for exactly ``intervals``
+        control intervals (random RRA, the control module driving), as the burn-in does:
+        mid-episode states, e.g. to fit observation statistics (``"rra"`` mode only)."""
+        if self.mode != "rra":
+            raise ConfigError(f"burned_in is only used with mode='rra', not mode={self.mode!r}")
+        if not 0 <= intervals < self.twin.params.episode_intervals:
+            raise ConfigError(
+                f"intervals={intervals!r} must be in [0, {self.twin.params.episode_intervals - 1}]"
+            )
+        self._burn_in_exact = intervals
+        try:
+            yield
+        finally:
+            self._burn_in_exact = None
+
     def _burn_in(self) -> None:
         """Drive every scenario for K ~ U{0..``burn_in_intervals``} intervals (see __init__)."""
         twin = self.twin
@@ -344,6 +363,8 @@ class VDTNTorchRLEnv(EnvBase):
             0, 2**31 - 1, (2,), generator=twin.generator, device=twin.generator.device
         ).tolist()
         intervals = draw[0] % (self.burn_in_intervals + 1)
+        if self._burn_in_exact is not None:
+            intervals = self._burn_in_exact
         rra = RandomRRAPolicy(self.num_actions, draw[1])
         for _ in range(intervals):
             self._run_radio(policy=rra)
@@ -432,7 +453,7 @@ class VDTNTorchRLEnv(EnvBase):
             self.completion.reset()
             if self.mode == "control_impaired":
                 self._run_radio()
-            if self.burn_in_intervals:
+            if self.burn_in_intervals or self._burn_in_exact is not None:
                 self._burn_in()
         elif bool(mask.any()):
             subframe = twin.subframe
