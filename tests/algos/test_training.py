@@ -244,6 +244,13 @@ def test_truncated_foreign_and_mismatched_checkpoints_raise(tmp_path):
     with pytest.raises(CheckpointError, match="does not exist"):
         load_checkpoint(tmp_path / "missing.pt")
 
+    # a checkpoint of format 1, whose shared centralised critic gave all agents one value
+    older = tmp_path / "older.pt"
+    payload = torch.load(good, weights_only=True)
+    torch.save({**payload, "format_version": 1}, older)
+    with pytest.raises(CheckpointError, match=r"format_version=1; .* reads format_version=2"):
+        load_checkpoint(older)
+
     other = to_dict(cfg)
     other["scenario"]["num_vehicles"] = 6
     with pytest.raises(CheckpointError, match="scenario.num_vehicles"):
