@@ -121,11 +121,11 @@ def _costs(result) -> dict[str, float]:
 WARM_STARTS = ("none", "causal_mpc")
 
 
-def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: TwinParams):
+def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: TwinParams, traces):
     """Train π* with the training defaults of ``vdtn-marl jocc`` (AlgoConfig(), CACC prior),
     the model-selection switches of the command line and ``warm_start`` ("none", or
-    "causal_mpc": DAgger imitation of the causal MPC first, as ``control.warm_start``);
-    returns (actor, training figures)."""
+    "causal_mpc": DAgger imitation of the causal MPC first, as ``control.warm_start``) on the
+    training part ``traces`` of ``--traces``; returns (actor, training figures)."""
     algo = replace(
         AlgoConfig(),
         validate_every=args.validate_every,
@@ -139,7 +139,7 @@ def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: 
             device=args.device,
             seed=seed,
             episode_intervals=ScenarioConfig().episode_intervals,
-            trace_source=named_sources(args.traces)[0],
+            trace_source=traces,
         ),
         "vehicle",
         algo,
@@ -155,7 +155,7 @@ def train_pi_star(args: argparse.Namespace, seed: int, warm_start: str, params: 
                 learner,
                 teacher,
                 params,
-                trace_source=named_sources(args.traces)[0],
+                trace_source=traces,
                 progress=bar.update,
             )
             distilled = asdict(stats)
@@ -239,9 +239,10 @@ def main(argv: list[str] | None = None) -> int:
     # π* (one per training seed) against CACC and the MPCs on held-out scenarios (perfect
     # observation), all on the same scenarios
     params = TwinParams.from_overrides(episode_intervals=max(args.intervals, 200))
+    train_traces, eval_traces = named_sources(args.traces)  # a recorded set split in time
     common = dict(
         perfect=True, episodes=args.episodes, intervals=args.intervals, seed=10**9 + args.seed,
-        device=args.device, trace_source=named_sources(args.traces)[1],
+        device=args.device, trace_source=eval_traces,
     )  # fmt: skip
     # the exact oracle optimises exactly the evaluated intervals
     exact_horizon = {"horizon_intervals": args.intervals}
@@ -252,7 +253,7 @@ def main(argv: list[str] | None = None) -> int:
     for warm_start in variants:
         name = f"pi_star_{warm_start}"
         for seed in parse_seeds("--pi-seeds", args.pi_seeds):
-            actor, trained = train_pi_star(args, seed, warm_start, params)
+            actor, trained = train_pi_star(args, seed, warm_start, params, train_traces)
             training.append(trained)
             result = evaluate_system(params, ActorPolicy(actor, "vehicle"), None, **common)
             costs[f"{name}_seed{seed}"] = _costs(result)
