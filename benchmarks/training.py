@@ -3,7 +3,7 @@
     python benchmarks/training.py                      # full run, writes results/training.json
     python benchmarks/training.py --iterations 5 --quick
     python benchmarks/training.py --warm-starts '' --preview-s '' --fps-iterations 0 \
-        --output benchmarks/results/training_baselines.json  # baselines only: no π*, no frames/s
+        --output baselines.json  # baselines only: no π*, no frames/s
 
 Figures:
 - MAPPO frames/s (collection + PPO update) on the batched TorchRL face at B scenarios
