@@ -374,7 +374,9 @@ class OracleController:
             with time constant ``leader_accel_decay_s``. None (default): the whole horizon
             (the oracle). 0: the causal MPC, which knows only the present and re-plans every
             interval; the cost gap between the two is the value of previewing the leader
-            trace, which a policy that observes only the present cannot close. Values in
+            trace, mostly out of reach of a policy that observes only the present (a
+            learned one can still beat this causal MPC where its leader model fits badly,
+            docs/control_vs_oracle.md). Values in
             between measure how that value grows with the preview (``benchmarks/training.py``).
         leader_accel_decay_s: time constant (s) of the leader model after the preview. For
             the causal MPC, on the synthetic traces (32 held-out scenarios × 10 s), 3 s gave
