@@ -27,6 +27,8 @@ Figures:
 from __future__ import annotations
 
 import argparse
+import datetime as dt
+import os
 import platform
 import statistics
 import time
@@ -57,7 +59,11 @@ RESULTS = Path(__file__).parent / "results" / "training.json"
 
 
 def frames_per_second(trainer: PPOTrainer, iterations: int) -> dict[str, float]:
+    """Frames/s of ``iterations`` MAPPO iterations (collection + update, and collection
+    alone) after one warm-up iteration, with the 1-minute load average before and after
+    (other processes on the cores slow every figure)."""
     trainer.train_iteration()  # warm-up (also fits the observation scaling)
+    load_before = os.getloadavg()[0]
     collect_s, total_s, frames = 0.0, 0.0, 0
     for _ in range(iterations):
         began = time.perf_counter()
@@ -68,7 +74,12 @@ def frames_per_second(trainer: PPOTrainer, iterations: int) -> dict[str, float]:
         collect_s += collected - began
         total_s += time.perf_counter() - began
         frames += data.numel()
-    return {"frames_per_s": frames / total_s, "collect_frames_per_s": frames / collect_s}
+    return {
+        "frames_per_s": frames / total_s,
+        "collect_frames_per_s": frames / collect_s,
+        "load_average_1min_before": load_before,
+        "load_average_1min_after": os.getloadavg()[0],
+    }
 
 
 def mappo_frames_per_second(args: argparse.Namespace) -> dict[str, dict]:
@@ -338,6 +349,7 @@ def main(argv: list[str] | None = None) -> int:
             args.output,
             {
                 "command": script_command(),
+                "written": dt.date.today().isoformat(),
                 "vdtn_marl_version": __version__,
                 "torch": torch.__version__,
                 "machine": f"{platform.processor() or platform.machine()}, "
