@@ -589,7 +589,8 @@ def _budget_lines(
     if seconds:
         lines.append(
             f"- **compute**: {len(seconds)} runs, {sum(seconds) / 60:.1f} min of run time in "
-            f"total (one run at a time, one torch thread each) on {platform.machine()}, "
+            "total, summed over the runs (wall time is shorter when shards run in parallel), "
+            f"on {platform.machine()}, "
             f"{os.cpu_count()} CPU cores"
         )
     return lines
