@@ -114,3 +114,39 @@ def test_bad_settings_and_impaired_twins_raise():
     twin.reset(seed=0)
     with pytest.raises(ValueError, match="expected"):
         ExactOracleController().bind(twin)(torch.zeros(3, 3, 8))
+
+
+def test_a_program_that_fails_with_presolve_is_solved_without_it(monkeypatch):
+    # HiGHS presolve ended in "numerical difficulties" (status 4) on one UDDS scenario that
+    # solves without presolve: the oracle must fall back instead of aborting the evaluation
+    import scipy.optimize
+
+    from vdtn_marl.algos import exact_oracle
+
+    twin = DigitalTwin(_params(), batch_size=2, seed=5, radio=False)
+    twin.reset(seed=5)
+    expected = ExactOracleController().solve(twin, 1)
+    calls = []
+
+    def presolve_fails(cost, *, method, options, **kwargs):
+        calls.append((method, dict(options)))
+        if options.get("presolve", True):
+            return scipy.optimize.OptimizeResult(status=4, message="numerical difficulties")
+        return scipy.optimize.linprog(cost, method=method, options=options, **kwargs)
+
+    monkeypatch.setattr(exact_oracle, "linprog", presolve_fails)
+    plan = ExactOracleController().solve(twin, 1)
+    assert calls == [
+        ("highs-ipm", {}),
+        ("highs-ds", {}),
+        ("highs-ds", {"presolve": False}),
+    ]
+    assert plan.planned_cost == pytest.approx(expected.planned_cost, rel=1e-6, abs=1e-8)
+    np.testing.assert_allclose(plan.commands_mps2, expected.commands_mps2, atol=1e-4)
+
+    def always_fails(cost, *, method, options, **kwargs):
+        return scipy.optimize.OptimizeResult(status=4, message="numerical difficulties")
+
+    monkeypatch.setattr(exact_oracle, "linprog", always_fails)
+    with pytest.raises(RuntimeError, match=r"scenario 1 at interval 0; tried highs-ipm"):
+        ExactOracleController().solve(twin, 1)

@@ -24,13 +24,13 @@ The program, per scenario, with N = H·F (H intervals, F followers):
   the twin counts as a collision).
 
 It is solved with HiGHS (``scipy.optimize.linprog``; interior point with crossover, dual
-simplex if that fails). The constraint matrices depend only on H and the platoon parameters
-and are built once; scenarios differ in the right-hand sides (leader trajectory, initial
-state). Measured (2 CPU cores, one thread): about 1.2 s per scenario for H = 200 intervals
-(10 s) and 2.4 s with the default 6 s tail (H = 320), i.e. about 5 min for 128 scenarios of
-10 s; the plan replayed in the twin earns the LP's optimum to float32 precision
-(tests/algos/test_exact_oracle.py). The loop over scenarios is a Python loop (one LP each),
-outside the simulator's hot path.
+simplex if that fails, then both without presolve: :data:`LP_ATTEMPTS`). The constraint
+matrices depend only on H and the platoon parameters and are built once; scenarios differ in
+the right-hand sides (leader trajectory, initial state). Measured (2 CPU cores, one thread):
+about 1.2 s per scenario for H = 200 intervals (10 s) and 2.4 s with the default 6 s tail (H =
+320), i.e. about 5 min for 128 scenarios of 10 s; the plan replayed in the twin earns the LP's
+optimum to float32 precision (tests/algos/test_exact_oracle.py). The loop over scenarios is a
+Python loop (one LP each), outside the simulator's hot path.
 
 With the 6 s tail, the exact optimum cost 0.0381 per follower and interval on the 128
 synthetic scenarios of ``benchmarks/training.py`` (where
@@ -52,6 +52,17 @@ from scipy.optimize import linprog
 
 from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.twin import DigitalTwin
+
+#: HiGHS methods and options tried in turn until one solves a scenario's program. Presolve
+#: can end in "numerical difficulties" (status 4) on programs that solve without it: one of
+#: 64 held-out UDDS scenarios (`benchmarks/training.py --traces udds --episodes 64`) failed
+#: with both methods and solved with presolve off, to the same optimum under both methods.
+LP_ATTEMPTS: tuple[tuple[str, dict], ...] = (
+    ("highs-ipm", {}),
+    ("highs-ds", {}),
+    ("highs-ds", {"presolve": False}),
+    ("highs-ipm", {"presolve": False}),
+)
 
 ORACLE_HORIZON_INTERVALS = 120
 """How far the oracles look ahead (intervals of 50 ms: 6 s): the receding horizon of
@@ -343,13 +354,18 @@ class ExactOracleController:
             program, pp, phi, lead_p, lead_v, follower_state, command[1:], self.margin_m
         )
         args = dict(A_ub=program.a_ub, b_ub=b_ub, A_eq=program.a_eq, b_eq=b_eq)
-        result = linprog(program.cost, bounds=program.bounds, method="highs-ipm", **args)
-        if result.status != 0:
-            result = linprog(program.cost, bounds=program.bounds, method="highs-ds", **args)
-        if result.status != 0:
+        failures = []
+        for method, options in LP_ATTEMPTS:
+            result = linprog(
+                program.cost, bounds=program.bounds, method=method, options=options, **args
+            )
+            if result.status == 0:
+                break
+            failures.append(f"{method} {options or ''}: {result.message}".replace(" :", ":"))
+        else:
             raise RuntimeError(
                 f"the exact oracle's linear program failed for scenario {scenario} at interval "
-                f"{interval}: {result.message}"
+                f"{interval}; tried {'; '.join(failures)}"
             )
         n = horizon * program.followers
         commands = result.x[:n].reshape(horizon, program.followers)
