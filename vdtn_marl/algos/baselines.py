@@ -19,7 +19,7 @@ Control baselines map vehicle observations ``[B, F, 8]`` to commands ``[B, F]`` 
   preview). It reads the twin, not the observation: use :meth:`OracleController.bind` to get
   an observation → command callable. It also works with impaired observation (the command
   waits for the CAM). Its subgradient solver is approximate: with the default
-  :data:`ORACLE_MPC_ITERATIONS` steps per interval its perfect-observation cost is 0.2–5.3 %
+  :data:`ORACLE_MPC_ITERATIONS` steps per interval its perfect-observation cost is 0.2–7.1 %
   above the exact optimum on the evaluation scenarios we measured; with 60 steps (leaderboard
   1.0) it was 19–42 % above it.
 - ``"exact_oracle"``: :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`, the exact
@@ -298,9 +298,10 @@ On perfect observation, held-out scenarios × 10 s, against the exact optimum of
 of a machine busy with other runs) and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps
 +3.8 % and 400 steps +0.26 % (0.02887 vs 0.02879); 16 scenarios of the stop-and-go UDDS cycle
 (data extra), 400 steps +3.6 % (0.01758 vs 0.01698), where 60 steps were 42 % above on 8 and
-worse than CACC; on the held-out last 20 % of the EPA cycles (16 scenarios each, π* trained
-on the first 80 %), 400 steps +5.3 % on UDDS and +0.2 % on HWFET
-(``benchmarks/results/training_udds.json``, ``training_hwfet.json``). The 400-step figures
+worse than CACC; on the held-out last 20 % of the EPA cycles (π* trained on the first 80 %),
+400 steps +7.1 % on UDDS and +1.2 % on HWFET with 64 scenarios each
+(``benchmarks/results/training_udds_64.json``, ``training_hwfet_64.json``; +5.3 % and +0.2 %
+with 16). The 400-step figures
 on 32 scenarios and on the whole UDDS cycle (measured before recorded sets were split in
 time) come from ``python benchmarks/training.py --warm-starts
 '' --preview-s '' --fps-iterations 0 --episodes N [--traces udds] --quick``. Leaderboard 1.0
