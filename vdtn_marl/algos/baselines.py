@@ -294,18 +294,17 @@ ORACLE_MPC_ITERATIONS = 400
 
 On perfect observation, held-out scenarios × 10 s, against the exact optimum of
 :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`: 128 synthetic scenarios
-(``benchmarks/training.py``), 400 steps +1.3 % (0.03862 vs 0.03814; 408 s on one CPU thread
-of a machine busy with other runs) and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps
-+3.8 % and 400 steps +0.26 % (0.02887 vs 0.02879); 16 scenarios of the stop-and-go UDDS cycle
-(data extra), 400 steps +3.6 % (0.01758 vs 0.01698), where 60 steps were 42 % above on 8 and
-worse than CACC; on the held-out last 20 % of the EPA cycles (π* trained on the first 80 %),
-400 steps +7.1 % on UDDS and +1.2 % on HWFET with 64 scenarios each
+(``benchmarks/training.py``), 400 steps +1.3 % (0.03862 vs 0.03814; 408 s on one CPU thread of
+a machine busy with other runs) and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps +3.8 %
+and 400 steps +0.26 % (0.02887 vs 0.02879); 16 scenarios of the stop-and-go UDDS cycle (data
+extra), 400 steps +3.6 % (0.01758 vs 0.01698), where 60 steps were 42 % above on 8 and worse
+than CACC; on the held-out last 20 % of the EPA cycles (π* trained on the first 80 %), 400
+steps +7.1 % on UDDS and +1.2 % on HWFET with 64 scenarios each
 (``benchmarks/results/training_udds_64.json``, ``training_hwfet_64.json``; +5.3 % and +0.2 %
-with 16). The 400-step figures
-on 32 scenarios and on the whole UDDS cycle (measured before recorded sets were split in
-time) come from ``python benchmarks/training.py --warm-starts
-'' --preview-s '' --fps-iterations 0 --episodes N [--traces udds] --quick``. Leaderboard 1.0
-and reduced 2.0 ran 60 steps (``control.mpc_iterations=60`` reproduces them)."""
+with 16). The 400-step figures on 32 scenarios and on the whole UDDS cycle (measured before
+recorded sets were split in time) come from ``python benchmarks/training.py --warm-starts ''
+--preview-s '' --fps-iterations 0 --episodes N [--traces udds] --quick``. Leaderboard 1.0 and
+reduced 2.0 ran 60 steps (``control.mpc_iterations=60`` reproduces them)."""
 
 CAUSAL_MPC_ITERATIONS = 200
 """Adam steps per interval of the ``causal_mpc`` baseline (and so of the ``warm_start`` teacher).

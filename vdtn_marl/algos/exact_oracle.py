@@ -361,7 +361,7 @@ class ExactOracleController:
             )
             if result.status == 0:
                 break
-            failures.append(f"{method} {options or ''}: {result.message}".replace(" :", ":"))
+            failures.append(f"{method}{f' {options}' if options else ''}: {result.message}")
         else:
             raise RuntimeError(
                 f"the exact oracle's linear program failed for scenario {scenario} at interval "

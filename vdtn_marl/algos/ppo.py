@@ -172,7 +172,7 @@ class PPOTrainer:
         (scenarios seeded apart from the training iterations).
 
         An RRA rollout is a few subframes long: from a reset alone its followers' control
-        errors are near zero, and scaling by that spread would blow them up ~100× on the
+        errors are near zero, and scaling by that spread would blow them up ~30× on the
         mid-episode states of evaluation. So RRA statistics also take a rollout from
         mid-episode (:meth:`VDTNTorchRLEnv.burned_in`).
         """
