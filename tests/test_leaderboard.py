@@ -16,6 +16,7 @@ import pytest
 
 from vdtn_marl import cli, config, leaderboard
 from vdtn_marl.config import ConfigError
+from vdtn_marl.runs import RAW_EVALUATION_FILE
 
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
 
@@ -70,7 +71,7 @@ def test_aggregate_degenerate_samples():
 
 def test_bootstrap_ci_width_matches_normal_theory():
     x = np.random.default_rng(1).normal(0.0, 1.0, size=200)
-    mean, low, high = leaderboard.bootstrap_ci(x, leaderboard._mean, resamples=5000)
+    mean, low, high = leaderboard.bootstrap_ci(x, np.mean, resamples=5000)
     half_width = 1.96 * x.std(ddof=1) / math.sqrt(x.size)
     assert low < mean < high
     assert (high - low) / 2 == pytest.approx(half_width, rel=0.15)
@@ -155,7 +156,7 @@ def test_shipped_benchmarks_plan_their_grid():
 def test_methods_must_share_the_evaluation_scenarios():
     cfg = _bench(budgets={"b": ["experiment.eval_episodes=3"]})
     cells = leaderboard.plan(cfg)
-    with leaderboard._hydra_compose():
+    with leaderboard.grid.hydra_compose():
         composed = {c: leaderboard.compose_cell(c, "cpu")[0] for c in cells}
     with pytest.raises(leaderboard.LeaderboardError, match="experiment.eval_episodes"):
         leaderboard.check_eval_pairing(composed)
@@ -304,7 +305,7 @@ def test_smoke_writes_markdown_and_plots(smoke):
         assert data.startswith(PNG_MAGIC) and len(data) > 5000, kind
         assert f"({path.name})" in text, kind
     cell = smoke["out"] / "platoon4" / "drra" / "seed0"
-    for name in ("summary.json", "config.yaml", "metrics.csv", leaderboard.RAW_EVAL_FILE):
+    for name in ("summary.json", "config.yaml", "metrics.csv", RAW_EVALUATION_FILE):
         assert (cell / name).is_file(), name
 
 

@@ -1,0 +1,230 @@
+"""The benchmark grid: metrics, cells (scenario × method × seed), their composed configs,
+and the state of the output directory (which cells are complete, whether it holds this
+benchmark).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Iterator, Mapping
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl.config import BenchConfig, BenchmarkConfig
+from vdtn_marl.runs import (
+    SUMMARY_FILE,
+    read_json,
+)
+
+MANIFEST_FILE = "benchmark.json"
+#: Config keys a resumed cell may change (the rest must match the cell's own run).
+FREE_KEYS = ("resume", "progress", "device", "threads", "checkpoint")
+
+
+class LeaderboardError(Exception):
+    """A benchmark that cannot run or resume as asked; the message says why and what to do."""
+
+
+@dataclass(frozen=True)
+class Metric:
+    key: str  # summary.json key
+    label: str  # column header, with the unit
+    better: str | None  # "min", "max" or None (no "best" is marked)
+    table: bool = True  # shown in LEADERBOARD.md (every metric is in the JSON and CSV)
+
+
+METRICS = (
+    Metric("control_cost", "control cost", "min"),
+    Metric("gap_error_abs_m", "\\|gap error\\| (m)", "min"),
+    Metric("speed_error_abs_mps", "\\|speed error\\| (m/s)", "min"),
+    Metric("collision_rate", "collisions (fraction of scenarios)", "min"),
+    Metric("cam_delivery_rate", "CAM delivery rate", "max"),
+    Metric("cam_latency_ms_mean", "CAM latency mean (ms)", "min", table=False),
+    Metric("cam_latency_ms_p50", "CAM latency p50 (ms)", "min"),
+    Metric("cam_latency_ms_p95", "CAM latency p95 (ms)", "min"),
+    Metric("v2i_throughput_mbps_per_link", "V2I throughput per link (Mbps)", "max"),
+    Metric("evoi", "EVoI", None),
+    Metric("evoi_ci_low", "EVoI CI low (within run)", None, table=False),
+    Metric("evoi_ci_high", "EVoI CI high (within run)", None, table=False),
+    Metric("optimal_control_cost", "control cost of π*", None, table=False),
+)
+METRIC_KEYS = tuple(m.key for m in METRICS)
+#: Metrics that are undefined (null) when a run delivered no CAM at all.
+CAM_LATENCY_KEYS = ("cam_latency_ms_mean", "cam_latency_ms_p50", "cam_latency_ms_p95")
+
+
+@dataclass(frozen=True)
+class Cell:
+    """One run of the grid."""
+
+    scenario: str
+    method: str
+    seed: int
+    overrides: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return f"{self.scenario}/{self.method}/seed{self.seed}"
+
+    def directory(self, out_dir: str | Path) -> Path:
+        return Path(out_dir) / self.scenario / self.method / f"seed{self.seed}"
+
+
+# --- the grid -------------------------------------------------------------------------------
+
+
+def cell_overrides(
+    benchmark: BenchmarkConfig, scenario: str, method: str, seed: int | None = None
+) -> list[str]:
+    """The ``vdtn-marl jocc`` overrides of one cell (``seed=None``: leave the seed out)."""
+    overrides = [
+        f"scenario={scenario}",
+        f"experiment={benchmark.experiment}",
+        *benchmark.overrides,
+        *benchmark.methods[method],
+        *benchmark.budgets.get(method, ()),
+    ]
+    if seed is not None:
+        overrides.append(f"seed={seed}")
+    return [str(o) for o in overrides]
+
+
+def plan(cfg: BenchConfig) -> list[Cell]:
+    """Every cell, seed by seed (so a partial run has every method on the first seeds)."""
+    b = cfg.benchmark
+    return [
+        Cell(scenario, method, int(seed), tuple(cell_overrides(b, scenario, method, seed)))
+        for seed in b.seeds
+        for scenario in b.scenarios
+        for method in b.methods
+    ]
+
+
+def bench_config(data: Mapping[str, Any]) -> BenchConfig:
+    """Plain composed data of ``conf/bench.yaml`` → :class:`BenchConfig` (not yet validated)."""
+    values = dict(data)
+    benchmark = BenchmarkConfig(**dict(values.pop("benchmark")))
+    return BenchConfig(benchmark=benchmark, **values)
+
+
+@contextlib.contextmanager
+def hydra_compose() -> Iterator[None]:
+    """Hydra's compose API: inside a Hydra app it is ready; elsewhere initialise it here."""
+    from hydra import initialize_config_module
+    from hydra.core.global_hydra import GlobalHydra
+
+    from vdtn_marl import cli
+    from vdtn_marl.config import register_configs
+
+    if GlobalHydra.instance().is_initialized():
+        yield
+        return
+    register_configs()
+    with initialize_config_module(config_module=cli.CONFIG_PACKAGE, version_base="1.3"):
+        yield
+
+
+def compose_cell(cell: Cell, device: str) -> tuple[dict, Any]:
+    """(composed config as plain data, validated RunConfig) of a cell, through the CLI's own
+    composition and validation (:func:`vdtn_marl.cli.to_run_config`)."""
+    from vdtn_marl import cli
+
+    overrides = [*cell.overrides, f"device={device}", "resume=true", "progress=false"]
+    try:
+        data = cli._job_config(cli._compose("config", overrides))
+        return data, cli.to_run_config(data, "jocc")
+    except Exception as exc:
+        raise LeaderboardError(
+            f"cell {cell.name}: {cli._translate(exc, 'config', overrides)}"
+        ) from exc
+
+
+def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:
+    """Every method of a scenario must see the same held-out scenarios (eval budget, model)."""
+    from vdtn_marl.results import flatten
+
+    reference: dict[str, tuple[Cell, dict]] = {}
+    for cell, data in cells_data.items():
+        flat = flatten(data)
+        keys = {k: v for k, v in flat.items() if k.startswith(("scenario.", "experiment.eval_"))}
+        if cell.scenario not in reference:
+            reference[cell.scenario] = (cell, keys)
+            continue
+        first, expected = reference[cell.scenario]
+        for key in sorted(set(expected) | set(keys)):
+            if expected.get(key) != keys.get(key):
+                raise LeaderboardError(
+                    f"benchmark method {cell.method!r} sets {key}={keys.get(key)!r} but "
+                    f"{first.method!r} has {key}={expected.get(key)!r} on scenario "
+                    f"{cell.scenario}: every method of a scenario must be evaluated on the same "
+                    "held-out scenarios; allowed: budgets that leave scenario.* and "
+                    "experiment.eval_* alone"
+                )
+
+
+# --- state of the output directory ----------------------------------------------------------
+
+
+#: Fields of a benchmark that decide its runs: an out_dir holds runs of one set of them.
+RUN_FIELDS = ("experiment", "overrides", "scenarios", "methods", "budgets", "seeds")
+
+
+def manifest(cfg: BenchConfig) -> dict[str, Any]:
+    b = cfg.benchmark
+    return {"name": b.name, "version": b.version, "benchmark": asdict(b)}
+
+
+def check_out_dir(cfg: BenchConfig) -> None:
+    """``out_dir`` is empty or holds this very benchmark definition (else: bump the version)."""
+    path = Path(cfg.out_dir) / MANIFEST_FILE
+    if not path.is_file():
+        return
+    try:
+        old = read_json(path)
+    except (OSError, ValueError) as exc:
+        raise LeaderboardError(
+            f"{path} cannot be read ({exc}); remove it or pick another out_dir"
+        ) from exc
+    new = manifest(cfg)
+    from vdtn_marl.results import flatten
+
+    a, b = flatten(old.get("benchmark", {})), flatten(new["benchmark"])
+    keys = {k for k in set(a) | set(b) if k.split(".")[0] in RUN_FIELDS}
+    differ = sorted(k for k in keys if a.get(k) != b.get(k))
+    if differ:
+        key = differ[0]
+        raise LeaderboardError(
+            f"out_dir={cfg.out_dir} holds benchmark {old.get('name')!r} version "
+            f"{old.get('version')!r} with benchmark.{key}={a.get(key)!r}, not {b.get(key)!r}; "
+            "a changed definition needs a new benchmark.version (and so a new out_dir) or "
+            "another out_dir"
+        )
+
+
+def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
+    """The cell's summary if the cell is finished (else None). A finished cell whose config
+    differs from ``data`` (outside :data:`FREE_KEYS`) raises :class:`LeaderboardError`."""
+    from vdtn_marl.results import flatten
+
+    path = cell_dir / SUMMARY_FILE
+    if not path.is_file():
+        return None
+    try:
+        summary = read_json(path)
+    except (OSError, ValueError):
+        return None
+    if not isinstance(summary, dict) or not all(k in summary for k in METRIC_KEYS):
+        return None
+    iterations = data.get("experiment", {}).get("jocc_iterations")
+    if summary.get("iterations") != iterations:
+        return None
+    old, new = flatten(summary.get("config") or {}), flatten(dict(data))
+    for key in sorted(set(old) & set(new)):
+        if key.split(".")[0] not in FREE_KEYS and old[key] != new[key]:
+            raise LeaderboardError(
+                f"{path} was run with {key}={old[key]!r}, the benchmark now gives "
+                f"{key}={new[key]!r}; bump benchmark.version (a new out_dir) or remove "
+                f"{cell_dir} to run it again"
+            )
+    return summary

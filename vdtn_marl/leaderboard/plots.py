@@ -1,0 +1,169 @@
+"""The leaderboard's PNG plots per scenario (error traces, bars with CIs, CAM latency CDF, κ1
+Pareto front, training curves).
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl import __version__
+from vdtn_marl.config import BenchConfig
+from vdtn_marl.leaderboard.grid import Cell
+from vdtn_marl.leaderboard.stats import is_finite
+from vdtn_marl.runs import (
+    CONFIG_FILE,
+    METRICS_FILE,
+    RAW_EVALUATION_FILE,
+)
+
+
+def load_raw_evaluation(cell_dir: Path) -> dict[str, Any] | None:
+    """The arrays of a cell's ``evaluation_raw.npz`` (None when it has none)."""
+    import numpy as np
+
+    path = Path(cell_dir) / RAW_EVALUATION_FILE
+    if not path.is_file():
+        return None
+    with np.load(path) as data:
+        return {k: data[k] for k in data.files}
+
+
+def write_plots(
+    cfg: BenchConfig,
+    rows: Sequence[Mapping[str, Any]],
+    stats: Mapping[str, Any],
+    report_dir: Path,
+) -> dict[str, dict[str, Path]]:
+    """The leaderboard's plots per scenario; returns ``{scenario: {kind: path}}``."""
+    import numpy as np
+    import pandas as pd
+
+    from vdtn_marl import results
+
+    b = cfg.benchmark
+    note = f"vdtn-marl {__version__} · benchmark {b.name} v{b.version}"
+    out: dict[str, dict[str, Path]] = {}
+    for scenario, by_method in stats.items():
+        plots: dict[str, Path] = {}
+        prefix = f"leaderboard_{scenario}_"
+        scenario_rows = [r for r in rows if r["scenario"] == scenario]
+        n_runs = {m: by_method[m]["control_cost"]["n"] for m in by_method}
+
+        def raw(method: str, seed: int, scenario: str = scenario) -> dict | None:
+            return load_raw_evaluation(Cell(scenario, method, seed, ()).directory(cfg.out_dir))
+
+        # 1. error traces of the trace methods, same scenario and seed
+        pair = [m for m in b.trace_methods if m in by_method]
+        for seed in b.seeds:
+            traces = {m: raw(m, seed) for m in pair}
+            if pair and all(t is not None and "gap_error_abs_m" in t for t in traces.values()):
+                interval = float(next(iter(traces.values()))["interval_s"])
+                plots["error_traces"] = results.plot_error_trace_comparison(
+                    {
+                        m: (t["gap_error_abs_m"], t["speed_error_abs_mps"])
+                        for m, t in traces.items()
+                    },
+                    interval,
+                    report_dir / f"{prefix}error_traces.png",
+                    title=f"{scenario}: {' vs '.join(pair)}, seed {seed}, evaluation scenario 0",
+                    note=note,
+                )
+                break
+
+        # 2. bars with CIs
+        for key, kind, ylabel in (
+            (results.V2I_THROUGHPUT, "v2i_throughput", "V2I throughput per link (Mbps)"),
+            ("cam_delivery_rate", "cam_delivery", "CAM delivery rate (fraction within interval)"),
+            ("control_cost", "control_cost", "control cost (dimensionless; lower is better)"),
+        ):
+            bars = [
+                {
+                    "label": method,
+                    **by_method[method][key],
+                    "values": [r.get(key) for r in scenario_rows if r["method"] == method],
+                }
+                for method in by_method
+            ]
+            plots[kind] = results.plot_metric_bars(
+                bars,
+                report_dir / f"{prefix}{kind}.png",
+                ylabel,
+                title=f"{scenario}: mean over seeds, {b.confidence:.0%} bootstrap CI, dots = runs",
+                note=note,
+            )
+
+        # 3. CAM latency CDF, every run's delivered CAMs pooled per method
+        latencies: dict[str, Any] = {}
+        interval_s = None
+        for method in by_method:
+            pooled = []
+            for seed in b.seeds:
+                data = raw(method, seed)
+                if data is not None and "cam_latency_ms" in data:
+                    pooled.append(data["cam_latency_ms"])
+                    interval_s = float(data["interval_s"])
+            if pooled:
+                delivered = by_method[method]["cam_delivery_rate"]["mean"]
+                share = f"{100 * delivered:.1f}%" if is_finite(delivered) else "–"
+                label = f"{method} ({share} of CAMs delivered)"
+                latencies[label] = np.concatenate(pooled)
+        if latencies and interval_s is not None:
+            plots["cam_latency_cdf"] = results.plot_latency_cdf(
+                latencies,
+                interval_s * 1000.0,
+                report_dir / f"{prefix}cam_latency_cdf.png",
+                title=f"{scenario}: latency of delivered CAMs, all runs pooled",
+                note=note,
+            )
+
+        # 4. κ1 Pareto front of the learned-RRA methods with learned control
+        pareto_rows = []
+        for row in scenario_rows:
+            cfg_file = Path(row["run_dir"]) / CONFIG_FILE
+            config = results._read_yaml(cfg_file) if cfg_file.is_file() else {}
+            flat = results.flatten(config or {})
+            if (
+                flat.get("rra.name") in ("jocc", "throughput")
+                and flat.get("control.name") == "learned"
+            ):
+                pareto_rows.append(
+                    {
+                        **{k: flat.get(k) for k in results.CONFIG_COLUMNS},
+                        **row,
+                        "rra.kappa1": flat.get("rra.kappa1"),
+                    }
+                )
+        table = pd.DataFrame(pareto_rows)
+        if len(table) and table["rra.kappa1"].nunique() > 1:
+            with contextlib.suppress(ValueError):
+                plots["pareto_kappa1"] = results.plot_kappa1_pareto(
+                    table,
+                    report_dir / f"{prefix}pareto_kappa1.png",
+                    title=f"{scenario}: κ1 of the RRA reward (learned control)",
+                    note=note,
+                )
+
+        # 5. training curves of the methods with a learned RRA policy
+        curves: dict[str, list[Path]] = {}
+        for method in by_method:
+            files = [
+                Cell(scenario, method, s, ()).directory(cfg.out_dir) / METRICS_FILE for s in b.seeds
+            ]
+            files = [f for f in files if f.is_file()]
+            rra_learned = any(
+                r.get("trainer_iterations.rra") for r in scenario_rows if r["method"] == method
+            )
+            if files and rra_learned:
+                curves[f"{method} (n={n_runs[method]})"] = files
+        if curves:
+            plots["training_curves"] = results.plot_training_curves(
+                curves,
+                report_dir / f"{prefix}training_curves.png",
+                title=f"{scenario}: mean over seeds (band: min–max)",
+                note=note,
+            )
+        out[scenario] = plots
+    return out

@@ -1,0 +1,363 @@
+"""The leaderboard's report: LEADERBOARD.md, the JSON/CSV statistics, marl-eval JSON and
+plots of the complete cells, and the rich table that ``vdtn-marl bench`` prints.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import platform
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl import __version__
+from vdtn_marl.config import BenchConfig
+from vdtn_marl.leaderboard.grid import (
+    METRICS,
+    Cell,
+    LeaderboardError,
+    compose_cell,
+    hydra_compose,
+    plan,
+)
+from vdtn_marl.leaderboard.plots import write_plots
+from vdtn_marl.leaderboard.stats import (
+    IQM_TRIM,
+    MIN_RUNS_FOR_IQM,
+    best_methods,
+    collect_runs,
+    is_finite,
+    marl_eval_data,
+    paired_differences,
+    statistics,
+)
+from vdtn_marl.runs import (
+    atomic_write_json,
+    atomic_write_text,
+    read_json,
+)
+
+REPORT_FILE = "LEADERBOARD.md"
+STATS_JSON = "leaderboard.json"
+MARL_EVAL_JSON = "leaderboard_marl_eval.json"
+STATS_CSV = "leaderboard.csv"
+RUNS_CSV = "leaderboard_runs.csv"
+
+
+def _fmt(value: Any) -> str:
+    if not is_finite(value):
+        return "–"
+    value = float(value)
+    if value != 0 and (abs(value) < 1e-3 or abs(value) >= 1e5):
+        return f"{value:.3e}"
+    return f"{value:.4g}"
+
+
+def _stat_cell(stat: Mapping[str, Any], prefix: str = "", bold: bool = False) -> str:
+    mean = stat.get(prefix or "mean")
+    if not is_finite(mean):
+        return "–"
+    text = _fmt(mean)
+    if bold:
+        text = f"**{text}**"
+    low, high = (
+        stat.get(f"{prefix}_ci_low" if prefix else "ci_low"),
+        stat.get(f"{prefix}_ci_high" if prefix else "ci_high"),
+    )
+    return f"{text}<br>[{_fmt(low)}, {_fmt(high)}]"
+
+
+def _budget_lines(
+    cfg: BenchConfig, composed: Mapping, rows: Sequence[Mapping[str, Any]]
+) -> list[str]:
+    b = cfg.benchmark
+    first = next(iter(composed.values()))[0]
+    e, a = first["experiment"], first["algo"]
+    seconds = [float(r["seconds"]) for r in rows if is_finite(r.get("seconds"))]
+    lines = [
+        f"- **budget**: `experiment={b.experiment}`"
+        + (f" with `{' '.join(b.overrides)}`" if b.overrides else "")
+        + f"; {e['jocc_iterations']} JOCC iteration(s) per run; a PPO iteration collects "
+        f"{a['num_envs']} scenarios × {a['rollout_steps']} control intervals (π*, π̃) or "
+        f"{a.get('rra_num_envs', a['num_envs'])} scenarios × {a['rra_rollout_steps']} "
+        "subframes (RRA agents); the Methods table lists the PPO iterations of each method",
+        f"- **evaluation**: {e['eval_episodes']} held-out scenarios × {e['eval_intervals']} "
+        f"control intervals ({e['eval_intervals'] * 0.05:g} s) per run, the same scenarios for "
+        "every method (evaluation seed = run seed + 10⁹)",
+        f"- **seeds**: {', '.join(str(s) for s in b.seeds)} ({len(b.seeds)} runs per scenario "
+        "× method)",
+    ]
+    if seconds:
+        lines.append(
+            f"- **compute**: {len(seconds)} runs, {sum(seconds) / 60:.1f} min of run time in "
+            "total, summed over the runs (wall time is shorter when shards run in parallel), "
+            f"on {platform.machine()}, "
+            f"{os.cpu_count()} CPU cores"
+        )
+    return lines
+
+
+def _png(path: Path) -> str:
+    return path.name
+
+
+def _markdown(
+    cfg: BenchConfig,
+    rows: Sequence[Mapping[str, Any]],
+    stats: Mapping[str, Any],
+    paired: Mapping[str, Any],
+    plots: Mapping[str, Mapping[str, Path]],
+    command: str,
+    composed: Mapping,
+    n_cells: int,
+    n_done: int,
+    dropped: Sequence[str],
+) -> str:
+    b = cfg.benchmark
+    table_metrics = [m for m in METRICS if m.table]
+    lines = [
+        f"# Leaderboard: `{b.name}` v{b.version}",
+        "",
+        f"- **benchmark**: `{b.name}`, version `{b.version}` (conf/benchmark/{b.name}.yaml)"
+        + (f": {b.description.strip()}" if b.description else ""),
+        f"- **command**: `{command}`" if command else "- **command**: (not recorded)",
+        f"- **vdtn-marl**: {__version__}; written {_dt.date.today().isoformat()} on "
+        f"{platform.machine()} ({platform.python_implementation()} "
+        f"{platform.python_version()})",
+        *_budget_lines(cfg, composed, rows),
+        f"- **statistics**: per scenario × method across seeds: mean with its "
+        f"{b.confidence:.0%} percentile-bootstrap CI ({b.bootstrap_resamples} resamples, "
+        "scipy.stats.bootstrap), IQM (interquartile mean) with its CI where there are "
+        f"≥ {MIN_RUNS_FOR_IQM} runs. Every method is evaluated on the same held-out scenarios "
+        "(same evaluation seed per run seed). **Bold**: best mean of a column (↓ lower is "
+        "better, ↑ higher); EVoI = J̃ − J* (discounted return of the acting system minus that "
+        "of π* with perfect observation, per follower) has no best.",
+    ]
+    if n_done < n_cells:
+        lines.append(
+            f"- **incomplete**: {n_done} of {n_cells} runs are complete; rerun the command to "
+            "finish the others"
+        )
+    lines += [
+        "",
+        "## Methods",
+        "",
+        "| method | overrides (method; budget) | PPO iterations per run: π*, π̃, RRA |",
+        "|---|---|---|",
+    ]
+    for method, overrides in b.methods.items():
+        extra = b.budgets.get(method, [])
+        text = f"`{' '.join(overrides)}`" + (f"; `{' '.join(extra)}`" if extra else "")
+        done = [r for r in rows if r["method"] == method]
+        counts = "–"
+        if done:
+            counts = ", ".join(
+                str(int(done[0].get(f"trainer_iterations.{k}") or 0))
+                for k in ("pi_star", "pi_tilde", "rra")
+            )
+        lines.append(f"| {method} | {text} | {counts} |")
+    for scenario, by_method in stats.items():
+        lines += ["", f"## {scenario}", ""]
+        header = ["method", "n"] + [
+            m.label + {"min": " ↓", "max": " ↑"}.get(m.better or "", "") for m in table_metrics
+        ]
+        lines.append("| " + " | ".join(header) + " |")
+        lines.append("|" + "|".join(["---"] + ["--:"] * (len(header) - 1)) + "|")
+        best = {m.key: best_methods(by_method, m) for m in table_metrics}
+        for method, metrics in by_method.items():
+            cells = [method, str(metrics["control_cost"]["n"])]
+            cells += [_stat_cell(metrics[m.key], bold=method in best[m.key]) for m in table_metrics]
+            lines.append("| " + " | ".join(cells) + " |")
+        if any(metrics["control_cost"]["iqm"] is not None for metrics in by_method.values()):
+            lines += [
+                "",
+                "<details><summary>IQM (interquartile mean) [95% CI]</summary>",
+                "",
+                "| method | " + " | ".join(m.label for m in table_metrics) + " |",
+                "|" + "|".join(["---"] + ["--:"] * len(table_metrics)) + "|",
+            ]
+            for method, metrics in by_method.items():
+                cells = [method] + [_stat_cell(metrics[m.key], "iqm") for m in table_metrics]
+                lines.append("| " + " | ".join(cells) + " |")
+            lines += ["", "</details>"]
+        pair = paired.get(scenario)
+        if pair:
+            lines += [
+                "",
+                f"Paired by seed (same held-out scenarios): **{pair['a']} − {pair['b']}**, "
+                f"mean difference over {len(pair['seeds'])} seeds [{b.confidence:.0%} "
+                "bootstrap CI]:",
+                "",
+                "| " + " | ".join(m.label for m in table_metrics) + " |",
+                "|" + "|".join(["--:"] * len(table_metrics)) + "|",
+                "| "
+                + " | ".join(_stat_cell(pair["differences"][m.key]) for m in table_metrics)
+                + " |",
+            ]
+        missing_latency = [
+            method
+            for method, metrics in by_method.items()
+            if metrics["cam_latency_ms_p50"]["n"] < metrics["control_cost"]["n"]
+        ]
+        if missing_latency:
+            lines += [
+                "",
+                "CAM latency is undefined for a run that delivered no CAM; those runs are left "
+                "out of the latency columns (their n is smaller): "
+                + ", ".join(
+                    f"{m} ({by_method[m]['cam_latency_ms_p50']['n']} of "
+                    f"{by_method[m]['control_cost']['n']})"
+                    for m in missing_latency
+                )
+                + ".",
+            ]
+        scenario_plots = plots.get(scenario, {})
+        captions = {
+            "error_traces": "Gap and speed errors over time",
+            "v2i_throughput": "V2I throughput per link",
+            "cam_delivery": "CAM delivery rate",
+            "cam_latency_cdf": "CAM latency CDF",
+            "pareto_kappa1": "κ1 Pareto front",
+            "control_cost": "Control cost",
+            "training_curves": "Training curves",
+        }
+        if scenario_plots:
+            lines.append("")
+            for kind, caption in captions.items():
+                if kind in scenario_plots:
+                    lines.append(f"![{scenario}: {caption}]({_png(scenario_plots[kind])})")
+    lines += [
+        "",
+        "## Files",
+        "",
+        f"- `{STATS_JSON}`: the statistics above and every run's metrics",
+        f"- `{STATS_CSV}`: statistics, one row per scenario × method × metric",
+        f"- `{RUNS_CSV}`: one row per run (all summary metrics)",
+        f"- `{MARL_EVAL_JSON}`: the runs in marl-eval's raw-data format",
+    ]
+    if dropped:
+        lines[-1] += f" (left out, not finite in every run: {', '.join(dropped)})"
+    return "\n".join(lines) + "\n"
+
+
+def write_report(
+    cfg: BenchConfig,
+    command: str = "",
+    cells: Sequence[Cell] | None = None,
+    composed: Mapping | None = None,
+) -> dict[str, Path]:
+    """Aggregate the complete cells of ``cfg.out_dir`` and write the report files (see the
+    module doc) into ``cfg.report_dir`` (default ``out_dir``); returns ``{kind: path}``."""
+    import pandas as pd
+
+    cells = list(cells if cells is not None else plan(cfg))
+    if composed is None:
+        with hydra_compose():
+            composed = {cell: compose_cell(cell, cfg.device) for cell in cells}
+    report_dir = Path(cfg.report_dir or cfg.out_dir)
+    report_dir.mkdir(parents=True, exist_ok=True)
+    b = cfg.benchmark
+    rows = collect_runs(cfg, cells, composed)
+    if not rows:
+        raise LeaderboardError(f"no complete run in {cfg.out_dir}; nothing to report")
+    stats = statistics(rows, b)
+    paired = paired_differences(rows, b)
+    plots = write_plots(cfg, rows, stats, report_dir)
+    marl_eval, dropped = marl_eval_data(rows, b)
+    header = {
+        "benchmark": b.name,
+        "version": b.version,
+        "vdtn_marl_version": __version__,
+        "command": command,
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "definition": asdict(b),
+    }
+    written: dict[str, Path] = {}
+    written["json"] = atomic_write_json(
+        report_dir / STATS_JSON,
+        {
+            **header,
+            "statistics_method": {
+                "interval": f"{b.confidence:.0%} percentile bootstrap across seeds "
+                "(scipy.stats.bootstrap)",
+                "resamples": b.bootstrap_resamples,
+                "iqm": f"scipy.stats.trim_mean(values, {IQM_TRIM}) where n >= {MIN_RUNS_FOR_IQM}",
+                "non_finite": "left out (n counts the finite values)",
+            },
+            "cells": {"total": len(cells), "complete": len(rows)},
+            "metrics": {
+                m.key: {"label": m.label.replace("\\", ""), "better": m.better} for m in METRICS
+            },
+            "statistics": stats,
+            "paired_differences": paired,
+            "runs": rows,
+        },
+    )
+    written["marl_eval"] = atomic_write_json(report_dir / MARL_EVAL_JSON, marl_eval)
+    stat_rows = [
+        {
+            "benchmark": b.name,
+            "version": b.version,
+            "scenario": scenario,
+            "method": method,
+            "metric": metric,
+            **values,
+        }
+        for scenario, by_method in stats.items()
+        for method, metrics in by_method.items()
+        for metric, values in metrics.items()
+    ]
+    written["csv"] = atomic_write_text(
+        report_dir / STATS_CSV, pd.DataFrame(stat_rows).to_csv(index=False)
+    )
+    written["runs_csv"] = atomic_write_text(
+        report_dir / RUNS_CSV, pd.DataFrame(rows).to_csv(index=False)
+    )
+    written["markdown"] = atomic_write_text(
+        report_dir / REPORT_FILE,
+        _markdown(
+            cfg, rows, stats, paired, plots, command, composed, len(cells), len(rows), dropped
+        ),
+    )
+    for scenario, kinds in plots.items():
+        for kind, path in kinds.items():
+            written[f"{scenario}/{kind}"] = path
+    return written
+
+
+def print_leaderboard(path: str | Path, console: Any = None) -> None:
+    """Print the mean [CI] of the main metrics per scenario from ``leaderboard.json``."""
+    import sys
+
+    from rich.console import Console
+    from rich.table import Table
+
+    data = read_json(path)
+    console = console or Console(width=None if sys.stdout.isatty() else 160)
+    shown = (
+        "control_cost",
+        "gap_error_abs_m",
+        "cam_delivery_rate",
+        "v2i_throughput_mbps_per_link",
+        "evoi",
+    )
+    labels = {m.key: m.label.replace("\\", "") for m in METRICS}
+    for scenario, by_method in data["statistics"].items():
+        table = Table(title=f"{data['benchmark']} v{data['version']}: {scenario}")
+        table.add_column("method")
+        table.add_column("n", justify="right")
+        for key in shown:
+            table.add_column(labels[key], justify="right")
+        for method, metrics in by_method.items():
+            cells = [method, str(metrics["control_cost"]["n"])]
+            for key in shown:
+                s = metrics[key]
+                cells.append(
+                    f"{_fmt(s['mean'])} [{_fmt(s['ci_low'])}, {_fmt(s['ci_high'])}]"
+                    if is_finite(s["mean"])
+                    else "–"
+                )
+            table.add_row(*cells)
+        console.print(table)
