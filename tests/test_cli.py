@@ -28,7 +28,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli
+from vdtn_marl import cli, cli_help, cli_prepass
 
 # Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli.py).
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
@@ -338,26 +338,27 @@ def _prevalidate(command: str, overrides: list[str]) -> None:
 
 @pytest.mark.parametrize("group", ["scenario", "algo", "control", "rra", "experiment"])
 def test_every_group_option_composes_and_validates(group):
-    options = cli.group_options(group)
+    options = cli_help.group_options(group)
     assert options, group
     for option in options:
         _prevalidate("jocc", [f"{group}={option}"])
 
 
 def test_group_options_as_documented():
-    assert set(cli.group_options("scenario")) == {
+    assert set(cli_help.group_options("scenario")) == {
         "platoon4",
         "platoon8",
         "platoon16",
         "platoon4_1mhz",
     }
-    assert set(cli.group_options("algo")) == {"mappo", "ippo"}
-    assert set(cli.group_options("rra")) == {
+    assert set(cli_help.group_options("algo")) == {"mappo", "ippo"}
+    assert set(cli_help.group_options("rra")) == {
         "jocc", "drra", "throughput", "random", "round_robin", "greedy",
     }  # fmt: skip
-    assert set(cli.group_options("control")) == {"learned", "cacc", "oracle", "causal_mpc"}
-    assert set(cli.group_options("experiment")) == {"smoke", "default", "paper"}
-    assert {"basic", "joblib", "submitit_slurm", "ray"} <= set(cli.group_options("hydra/launcher"))
+    assert set(cli_help.group_options("control")) == {"learned", "cacc", "oracle", "causal_mpc"}
+    assert set(cli_help.group_options("experiment")) == {"smoke", "default", "paper"}
+    launchers = set(cli_help.group_options("hydra/launcher"))
+    assert {"basic", "joblib", "submitit_slurm", "ray"} <= launchers
 
 
 def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
@@ -596,6 +597,6 @@ def test_default_config_mirrors_the_dataclass_defaults():
 
     register_configs()
     with initialize_config_module(config_module="vdtn_marl.conf", version_base="1.3"):
-        composed = flatten(cli._job_config(compose("config")))
+        composed = flatten(cli_prepass.job_config(compose("config")))
     expected = flatten(to_dict(RunConfig()))
     assert composed == expected

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli
+from vdtn_marl import cli, cli_help, cli_prepass
 
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
 
@@ -29,8 +29,8 @@ def _compose(overrides: list[str]) -> dict:
     from vdtn_marl.config import register_configs
 
     register_configs()
-    with initialize_config_module(config_module=cli.CONFIG_PACKAGE, version_base="1.3"):
-        return cli._job_config(cli._compose("config", overrides))
+    with initialize_config_module(config_module=cli_help.CONFIG_PACKAGE, version_base="1.3"):
+        return cli_prepass.job_config(cli_prepass.compose_config("config", overrides))
 
 
 def _make_run(run_dir: Path, overrides: list[str], task: str = "jocc", trained=()) -> dict:
@@ -39,7 +39,7 @@ def _make_run(run_dir: Path, overrides: list[str], task: str = "jocc", trained=(
     from vdtn_marl.algos.jocc import JointOptimisation
 
     data = _compose(overrides)
-    run_cfg = cli.to_run_config(dict(data), task)
+    run_cfg = cli_prepass.to_run_config(dict(data), task)
     loop = JointOptimisation(run_cfg, run_dir, task=task)
     for name, trainer in loop.trainers().items():
         trainer.iteration = int(name in trained)
@@ -109,7 +109,7 @@ def test_eval_overrides_recompose_the_run_config_exactly(overrides, tmp_path):
     run = tmp_path / "run"
     data = _make_run(run, overrides, trained=TRAINED)
     composed = _compose(cli.eval_overrides([f"checkpoint={run}"]))
-    for key in cli.EVAL_FRESH_KEYS:
+    for key in cli_help.EVAL_FRESH_KEYS:
         data.pop(key), composed.pop(key)
     assert composed == data
 
@@ -418,7 +418,7 @@ def test_logged_stage_logs_start_and_end_with_wall_time(caplog):
 
 
 def test_help_lists_what_each_command_writes():
-    outputs = {c: cli.command_help(c).split("outputs:")[1].split("hydra flags")[0] for c in
+    outputs = {c: cli_help.command_help(c).split("outputs:")[1].split("hydra flags")[0] for c in
                ("eval", "jocc")}  # fmt: skip
     assert "metrics.csv" not in outputs["eval"] and "checkpoints" not in outputs["eval"]
     assert "summary.json" in outputs["eval"] and "eval.log" in outputs["eval"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdtn_marl import cli, config, leaderboard
+from vdtn_marl import cli, cli_help, config, leaderboard
 from vdtn_marl.config import ConfigError
 from vdtn_marl.runs import RAW_EVALUATION_FILE
 
@@ -142,13 +142,13 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 def test_shipped_benchmarks_plan_their_grid():
     for name, cells in (("smoke", 12), ("reduced", 165), ("leaderboard", 165)):
-        data = cli.read_conf_yaml("benchmark", f"{name}.yaml")
+        data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
         cfg = config.validate_benchmark(
             config.BenchConfig(benchmark=config.BenchmarkConfig(**data))
         )
         assert len(leaderboard.plan(cfg)) == cells, name
         assert data["version"] and len(data["trace_methods"]) == 2
-    lb = cli.read_conf_yaml("benchmark", "leaderboard.yaml")
+    lb = cli_help.read_conf_yaml("benchmark", "leaderboard.yaml")
     assert len(lb["seeds"]) >= 5
     assert {"platoon4", "platoon8", "platoon4_1mhz"} <= set(lb["scenarios"])
 
@@ -218,7 +218,7 @@ def smoke(tmp_path_factory):
     result = _run_cli(*args, cwd=base)
     assert result.returncode == 0, result.stderr[-3000:]
     cfg = config.BenchConfig(
-        benchmark=config.BenchmarkConfig(**cli.read_conf_yaml("benchmark", "smoke.yaml")),
+        benchmark=config.BenchmarkConfig(**cli_help.read_conf_yaml("benchmark", "smoke.yaml")),
         out_dir=str(out),
         report_dir=str(report),
     )

@@ -114,29 +114,29 @@ def hydra_compose() -> Iterator[None]:
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
 
-    from vdtn_marl import cli
+    from vdtn_marl import cli_help
     from vdtn_marl.config import register_configs
 
     if GlobalHydra.instance().is_initialized():
         yield
         return
     register_configs()
-    with initialize_config_module(config_module=cli.CONFIG_PACKAGE, version_base="1.3"):
+    with initialize_config_module(config_module=cli_help.CONFIG_PACKAGE, version_base="1.3"):
         yield
 
 
 def compose_cell(cell: Cell, device: str) -> tuple[dict, Any]:
     """(composed config as plain data, validated RunConfig) of a cell, through the CLI's own
-    composition and validation (:func:`vdtn_marl.cli.to_run_config`)."""
-    from vdtn_marl import cli
+    composition and validation (:func:`vdtn_marl.cli_prepass.to_run_config`)."""
+    from vdtn_marl import cli_errors, cli_prepass
 
     overrides = [*cell.overrides, f"device={device}", "resume=true", "progress=false"]
     try:
-        data = cli._job_config(cli._compose("config", overrides))
-        return data, cli.to_run_config(data, "jocc")
+        data = cli_prepass.job_config(cli_prepass.compose_config("config", overrides))
+        return data, cli_prepass.to_run_config(data, "jocc")
     except Exception as exc:
         raise LeaderboardError(
-            f"cell {cell.name}: {cli._translate(exc, 'config', overrides)}"
+            f"cell {cell.name}: {cli_errors.translate(exc, 'config', overrides)}"
         ) from exc
 
 
