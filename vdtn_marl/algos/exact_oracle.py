@@ -34,7 +34,7 @@ Python loop (one LP each), outside the simulator's hot path.
 
 With the 6 s tail, the exact optimum cost 0.0381 per follower and interval on the 128
 synthetic scenarios of ``benchmarks/training.py`` (where
-:class:`~vdtn_marl.algos.baselines.OracleController`, the receding-horizon MPC with a
+:class:`~vdtn_marl.algos.mpc_oracle.OracleController`, the receding-horizon MPC with a
 subgradient solver, cost 0.0453: 19 % more), and 0.046 on 8 UDDS scenarios (the MPC: 0.065,
 42 % more, and more than CACC's 0.055). That MPC is therefore not the lower bound its name
 suggests; see the README (Training, VoI and baselines).
@@ -66,7 +66,7 @@ LP_ATTEMPTS: tuple[tuple[str, dict], ...] = (
 
 ORACLE_HORIZON_INTERVALS = 120
 """How far the oracles look ahead (intervals of 50 ms: 6 s): the receding horizon of
-:class:`~vdtn_marl.algos.baselines.OracleController` and the tail that
+:class:`~vdtn_marl.algos.mpc_oracle.OracleController` and the tail that
 :class:`ExactOracleController` plans beyond the intervals it is scored on."""
 
 BLOCKS = ("u", "p", "v", "a", "t_p", "t_v", "t_u", "t_j", "s")

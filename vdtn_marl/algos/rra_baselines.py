@@ -1,0 +1,215 @@
+"""Radio resource allocation (RRA) heuristics: round robin and greedy (best estimated SINR).
+
+They map RRA observations ``[..., L, D]`` (NumPy or torch, docs/model.md §4.6) to integer
+actions ``[..., L]`` of the same kind, like :class:`~vdtn_marl.envs.policies.RandomRRAPolicy`.
+Action encoding (``vdtn_marl.sim.link.ActionTables``): a = c·P + l for sub-channel c ∈ [0, M)
+and power level l ∈ [0, P); ``RadioParams.v2v_power_levels_dbm`` lists levels 0..P−2 (23, 15,
+5 dBm by default, level 0 the highest) and the last level P−1 is "off". Build them by name
+with :func:`vdtn_marl.algos.baselines.make_rra_baseline`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+from vdtn_marl.sim.link import RRA_OBS_GAIN_SCALE_DB
+from vdtn_marl.sim.params import RadioParams
+from vdtn_marl.sim.twin import RRA_CONTROL_FEATURES
+
+_LN10_OVER_10 = math.log(10.0) / 10.0
+
+
+@dataclass(frozen=True)
+class RRAFeatureLayout:
+    """Where each feature block sits in an RRA observation of ``dim`` = 4M + 6 features.
+
+    Derived from :meth:`DigitalTwin._rra_observation_buffer` and
+    :func:`vdtn_marl.sim.link.rra_static_observation` (docs/model.md §4.6), for M sub-channels:
+
+    ====================  ============  ====================================================
+    block                 indices       content (per sub-channel where there are M of them)
+    ====================  ============  ====================================================
+    ``own_snr``           [0, M)        own V2V link SNR at maximum power, in 10 dB units
+    ``bs_interference``   [M, 2M)       INR it would cause at the BS at maximum power, 10 dB
+    ``v2i_interference``  [2M, 3M)      INR it receives from the V2I user of each
+                                        sub-channel, in 10 dB units
+    ``occupancy``         [3M, 4M)      V2V links that transmitted on it last subframe / L
+    ``bits_left``         4M            fraction of the CAM bits still to send
+    ``time_left``         4M + 1        fraction of the interval left
+    ``control``           [4M+2, dim)   e_p/15 m, e_v/10 m/s, a_pred/2.6, u_prev/2.6
+    ====================  ============  ====================================================
+
+    The three CSI blocks are clipped to ``RRA_OBS_GAIN_CLIP`` (−50 dB … 150 dB).
+    """
+
+    num_subchannels: int
+    own_snr: slice
+    bs_interference: slice
+    v2i_interference: slice
+    occupancy: slice
+    bits_left: int
+    time_left: int
+    control: slice
+    dim: int
+
+    @classmethod
+    def from_radio(cls, radio: RadioParams) -> RRAFeatureLayout:
+        m = radio.num_subchannels
+        return cls(
+            num_subchannels=m,
+            own_snr=slice(0, m),
+            bs_interference=slice(m, 2 * m),
+            v2i_interference=slice(2 * m, 3 * m),
+            occupancy=slice(3 * m, 4 * m),
+            bits_left=4 * m,
+            time_left=4 * m + 1,
+            control=slice(4 * m + 2, 4 * m + 2 + RRA_CONTROL_FEATURES),
+            dim=4 * m + 2 + RRA_CONTROL_FEATURES,
+        )
+
+
+def encode_rra_action(subchannel, power_level, num_power_levels: int):
+    """RRA action index a = sub-channel·P + power level (inverse of ``link.ActionTables``).
+
+    Works elementwise on ints, NumPy arrays and torch tensors.
+    """
+    return subchannel * num_power_levels + power_level
+
+
+def max_power_level(radio: RadioParams) -> int:
+    """Index of the highest transmit power in ``radio.v2v_power_levels_dbm`` (0 by default)."""
+    return int(np.argmax(radio.v2v_power_levels_dbm))
+
+
+def _check_power_level(power_level: int, num_power_levels: int) -> None:
+    if (
+        isinstance(power_level, bool)
+        or not isinstance(power_level, int | np.integer)
+        or not 0 <= power_level < num_power_levels
+    ):
+        raise ValueError(
+            f"power_level={power_level!r} must be an integer in [0, {num_power_levels - 1}] "
+            f"(level {num_power_levels - 1} is 'off')"
+        )
+
+
+def _check_links(observation, num_links: int, dim: int | None = None) -> None:
+    shape = tuple(observation.shape)
+    if len(shape) < 2 or shape[-2] != num_links or (dim is not None and shape[-1] != dim):
+        want = f"[..., {num_links}, {dim if dim is not None else 'D'}]"
+        raise ValueError(f"RRA observation has shape {shape}, expected {want}")
+
+
+class RoundRobinRRAPolicy:
+    """Fixed rotating allocation: link i on sub-channel (i + t) mod M at ``power_level``.
+
+    t counts the calls (one per 1 ms subframe) since construction or :meth:`reset`; with
+    L ≤ M the links use distinct sub-channels in every subframe. Called with RRA observations
+    ``[..., L, D]`` (NumPy or torch); returns integer actions ``[..., L]`` of the same kind
+    (int64). ``power_level`` indexes ``RadioParams.v2v_power_levels_dbm`` (0 = 23 dBm by
+    default); the last level ``num_power_levels − 1`` is "off".
+    """
+
+    def __init__(
+        self, num_links: int, num_subchannels: int, num_power_levels: int, power_level: int = 0
+    ):
+        for name, value in (
+            ("num_links", num_links),
+            ("num_subchannels", num_subchannels),
+            ("num_power_levels", num_power_levels),
+        ):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        _check_power_level(power_level, num_power_levels)
+        self.num_links = int(num_links)
+        self.num_subchannels = int(num_subchannels)
+        self.num_power_levels = int(num_power_levels)
+        self.power_level = int(power_level)
+        self._links = np.arange(self.num_links)
+        self._links_torch: dict[torch.device, torch.Tensor] = {}
+        self.reset()
+
+    def seed(self, seed: int | None) -> None:
+        """No randomness; resets the subframe counter (API symmetry with the random policy)."""
+        self.reset()
+
+    def reset(self) -> None:
+        """Restart the rotation at t = 0."""
+        self.t = 0
+
+    def __call__(self, observation):
+        _check_links(observation, self.num_links)
+        t, self.t = self.t, self.t + 1
+        if isinstance(observation, np.ndarray):
+            channel = (self._links + t) % self.num_subchannels
+            actions = encode_rra_action(channel, self.power_level, self.num_power_levels)
+            return np.broadcast_to(actions, observation.shape[:-1]).astype(np.int64)
+        dev = observation.device
+        links = self._links_torch.get(dev)
+        if links is None:
+            links = self._links_torch[dev] = torch.arange(self.num_links, device=dev)
+        channel = (links + t) % self.num_subchannels
+        actions = encode_rra_action(channel, self.power_level, self.num_power_levels)
+        return actions.expand(observation.shape[:-1]).clone()
+
+
+class GreedyRRAPolicy:
+    """Each link transmits at maximum power on its best sub-channel, read from the observation.
+
+    Score of sub-channel m for link i (dB): the estimated SINR against the V2I user on m,
+
+        s_m = SNR_m − 10·log10(1 + INR_m),
+
+    with SNR_m the own-link SNR at maximum power (``own_snr`` block) and INR_m the V2I user's
+    interference-to-noise ratio at the link's receiver (``v2i_interference`` block), both in dB
+    (:class:`RRAFeatureLayout`). For INR ≫ 1 this is SNR − INR. Interference from the other
+    V2V links and the harm done to the V2I uplink are ignored (greedy, uncoordinated). Ties go
+    to the lowest sub-channel. Batched: observations ``[..., L, D]`` (NumPy or torch) →
+    int64 actions ``[..., L]`` of the same kind.
+
+    Args:
+        num_links: L V2V links (followers).
+        radio: radio parameters (M, power levels); defaults to ``RadioParams()``.
+        power_level: power level used (default: the highest, :func:`max_power_level`).
+    """
+
+    def __init__(
+        self, num_links: int, radio: RadioParams | None = None, power_level: int | None = None
+    ):
+        if isinstance(num_links, bool) or not isinstance(num_links, int | np.integer):
+            raise ValueError(f"num_links={num_links!r} must be an integer >= 1")
+        if num_links < 1:
+            raise ValueError(f"num_links={num_links!r} must be an integer >= 1")
+        radio = radio or RadioParams()
+        self.num_links = int(num_links)
+        self.layout = RRAFeatureLayout.from_radio(radio)
+        self.num_power_levels = radio.num_power_levels
+        self.power_level = max_power_level(radio) if power_level is None else power_level
+        _check_power_level(self.power_level, self.num_power_levels)
+
+    def seed(self, seed: int | None) -> None:
+        """Deterministic policy: nothing to seed (API symmetry)."""
+
+    def reset(self) -> None:
+        """Stateless policy: nothing to reset (API symmetry)."""
+
+    def scores_db(self, observation):
+        """Estimated SINR s_m (dB) of each sub-channel, ``[..., L, M]``."""
+        _check_links(observation, self.num_links, self.layout.dim)
+        lay = self.layout
+        snr_db = observation[..., lay.own_snr] * RRA_OBS_GAIN_SCALE_DB
+        inr_db = observation[..., lay.v2i_interference] * RRA_OBS_GAIN_SCALE_DB
+        if isinstance(observation, np.ndarray):
+            soft = np.logaddexp(0.0, inr_db * _LN10_OVER_10)
+        else:
+            soft = torch.logaddexp(torch.zeros_like(inr_db), inr_db * _LN10_OVER_10)
+        return snr_db - soft / _LN10_OVER_10  # 10·log10(1 + 10^(INR/10))
+
+    def __call__(self, observation):
+        best = self.scores_db(observation).argmax(-1)
+        actions = encode_rra_action(best, self.power_level, self.num_power_levels)
+        return actions.astype(np.int64) if isinstance(actions, np.ndarray) else actions.long()
