@@ -27,9 +27,7 @@ Figures:
 from __future__ import annotations
 
 import argparse
-import datetime as dt
 import os
-import platform
 import statistics
 import time
 from dataclasses import asdict, replace
@@ -37,21 +35,17 @@ from pathlib import Path
 
 import torch
 
-from vdtn_marl import __version__
-from vdtn_marl.algos.baselines import (
-    CAUSAL_MPC_ITERATIONS,
-    ORACLE_HORIZON_INTERVALS,
-    make_control_baseline,
-)
+from vdtn_marl.algos.baselines import CAUSAL_MPC_ITERATIONS, make_control_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
+from vdtn_marl.algos.exact_oracle import ORACLE_HORIZON_INTERVALS
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
-from vdtn_marl.benchmarking import parse_names, parse_seeds
+from vdtn_marl.benchmarking import parse_names, parse_seeds, provenance
 from vdtn_marl.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.data import trace_source_names
 from vdtn_marl.data.selection import named_sources
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.runs import atomic_write_json, progress, script_command
+from vdtn_marl.runs import atomic_write_json, progress
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 
@@ -348,12 +342,7 @@ def main(argv: list[str] | None = None) -> int:
         atomic_write_json(
             args.output,
             {
-                "command": script_command(),
-                "written": dt.date.today().isoformat(),
-                "vdtn_marl_version": __version__,
-                "torch": torch.__version__,
-                "machine": f"{platform.processor() or platform.machine()}, "
-                f"{torch.get_num_threads()} torch threads",
+                **provenance("training"),
                 "device": args.device,
                 **rows,
             },

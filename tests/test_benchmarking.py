@@ -1,6 +1,8 @@
 """Option parsing, provenance and summaries shared by the benchmark scripts."""
 
+import importlib.util
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -64,3 +66,23 @@ def test_checkpoint_run_names_the_run():
         "checkpoint": "runs/x/last.pt", "scenario": "platoon4", "seed": 4,
         "rra_reward": "jocc", "kappa1": 0.5,
     }  # fmt: skip
+
+
+BENCHMARK_SCRIPTS = sorted(
+    p
+    for p in (Path(__file__).resolve().parents[1] / "benchmarks").glob("*.py")
+    if p.name != "leaderboard.py"  # a thin front of `vdtn-marl bench` (tests/test_leaderboard.py)
+)
+
+
+@pytest.mark.parametrize("script", BENCHMARK_SCRIPTS, ids=lambda p: p.name)
+def test_benchmark_script_imports_and_prints_help(script, capsys):
+    """Every script under benchmarks/ imports what it uses from the package (a moved or renamed
+    name fails here, not in someone's hours-long run) and answers --help."""
+    spec = importlib.util.spec_from_file_location(f"_bench_{script.stem}", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    with pytest.raises(SystemExit) as exit_info:
+        module.main(["--help"])
+    assert exit_info.value.code == 0
+    assert "usage:" in capsys.readouterr().out

@@ -8,7 +8,11 @@ reward of docs/model.md §2.3 is a weighted sum of absolute values of affine fun
 states and commands, so minimising the episode's control cost over all command sequences
 U ∈ [u_min, u_max]^{H×F} is a linear program (each |e| becomes an auxiliary t ≥ ±e). Its
 optimum, planned once per episode over the whole remaining trace and replayed open loop, is
-the lowest control cost any controller can reach on that trace: the exact oracle.
+the lowest control cost any controller can reach on that trace: the exact oracle. That holds
+as stated with ``tail_intervals=0``; by default the program also plans a 6 s tail beyond the
+scored intervals so the plan does not exploit the episode's end (see
+:class:`ExactOracleController`), and on evaluations much shorter than that tail (say 1 s) a
+controller that ignores what comes after can score below it.
 
 The program, per scenario, with N = H·F (H intervals, F followers):
 
