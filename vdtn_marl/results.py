@@ -172,7 +172,8 @@ def pareto_mask(cost: Sequence[float], value: Sequence[float]) -> list[bool]:
     return mask
 
 
-def _finite(value: Any) -> bool:
+def is_finite(value: Any) -> bool:
+    """Whether ``value`` is a finite int or float (not a bool, None or NaN)."""
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
@@ -194,10 +195,10 @@ def plot_kappa1_pareto(
     import matplotlib.pyplot as plt
 
     data = table[[c for c in table.columns if c in (x, y, "rra.kappa1", "seed", *CONFIG_COLUMNS)]]
-    data = data[data[x].map(_finite) & data[y].map(_finite)].copy()
+    data = data[data[x].map(is_finite) & data[y].map(is_finite)].copy()
     if data.empty:
         raise ValueError(f"no job has finite values of both {x!r} and {y!r}")
-    has_kappa = "rra.kappa1" in data.columns and data["rra.kappa1"].map(_finite).all()
+    has_kappa = "rra.kappa1" in data.columns and data["rra.kappa1"].map(is_finite).all()
 
     fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
     if has_kappa:
@@ -291,7 +292,7 @@ def summarize_sweep(
     x_col, y_col = columns[x], columns[y]
     incomplete = [
         r for r, a, b in zip(table["run"], table[x_col], table[y_col], strict=True)
-        if not (_finite(a) and _finite(b))
+        if not (is_finite(a) and is_finite(b))
     ]  # fmt: skip
     if incomplete:
         notes.append(
@@ -339,8 +340,8 @@ def print_table(table: Any, console: Any = None, title: str | None = None) -> No
             c
             for c in columns
             if c not in ("run", "overrides", *CONFIG_COLUMNS)
-            and table[c].map(lambda v: _finite(v) or v is None).all()
-            and table[c].map(_finite).any()
+            and table[c].map(lambda v: is_finite(v) or v is None).all()
+            and table[c].map(is_finite).any()
         ][:8]
     shown = ["run", *config_cols, *metric_cols]
     cells = [[_format_cell(row.get(c)) for c in shown] for _, row in table.iterrows()]
@@ -579,16 +580,16 @@ def plot_metric_bars(
     fig, ax = plt.subplots(figsize=(max(5.0, 0.75 * len(rows) + 2.0), 4.2), dpi=120)
     positions = np.arange(len(rows))
     for i, row in enumerate(rows):
-        if not _finite(row.get("mean")):
+        if not is_finite(row.get("mean")):
             ax.text(i, 0, "n/a", ha="center", va="bottom", fontsize=8)
             continue
         mean = float(row["mean"])
-        low = float(row["ci_low"]) if _finite(row.get("ci_low")) else mean
-        high = float(row["ci_high"]) if _finite(row.get("ci_high")) else mean
+        low = float(row["ci_low"]) if is_finite(row.get("ci_low")) else mean
+        high = float(row["ci_high"]) if is_finite(row.get("ci_high")) else mean
         ax.bar(i, mean, color=f"C{i % 10}", alpha=0.75, width=0.7)
         ax.errorbar(i, mean, yerr=[[mean - low], [high - mean]], color="black", capsize=4,
                     linewidth=1)  # fmt: skip
-        values = [float(v) for v in row.get("values", ()) if _finite(v)]
+        values = [float(v) for v in row.get("values", ()) if is_finite(v)]
         if values:
             offsets = np.linspace(-0.15, 0.15, len(values)) if len(values) > 1 else [0.0]
             ax.scatter(i + np.asarray(offsets), values, s=10, color="black", zorder=3,

@@ -12,7 +12,7 @@ from typing import Any
 from vdtn_marl import __version__
 from vdtn_marl.config import BenchConfig
 from vdtn_marl.leaderboard.grid import Cell
-from vdtn_marl.leaderboard.stats import is_finite
+from vdtn_marl.results import is_finite
 from vdtn_marl.runs import (
     CONFIG_FILE,
     METRICS_FILE,

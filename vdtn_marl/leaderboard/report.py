@@ -28,11 +28,11 @@ from vdtn_marl.leaderboard.stats import (
     MIN_RUNS_FOR_IQM,
     best_methods,
     collect_runs,
-    is_finite,
     marl_eval_data,
     paired_differences,
     statistics,
 )
+from vdtn_marl.results import is_finite
 from vdtn_marl.runs import (
     atomic_write_json,
     atomic_write_text,

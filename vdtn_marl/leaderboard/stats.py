@@ -4,22 +4,17 @@ differences) and the marl-eval raw-data export.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 from vdtn_marl.config import BenchConfig, BenchmarkConfig
 from vdtn_marl.leaderboard.grid import METRICS, Cell, Metric, complete_summary
+from vdtn_marl.results import is_finite
 
 MIN_RUNS_FOR_IQM = 5
 IQM_TRIM = 0.25  # IQM: mean of the middle 50% (scipy.stats.trim_mean with 25% cut each side)
 
 STAT_KEYS = ("n", "mean", "ci_low", "ci_high", "std", "iqm", "iqm_ci_low", "iqm_ci_high")
-
-
-def is_finite(value: Any) -> bool:
-    """Whether ``value`` is a finite int or float (not a bool, None or NaN)."""
-    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _iqm(values: Any, axis: int = -1) -> Any:
