@@ -212,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
         "--traces",
         default="synthetic",
         help="leader trace set of π*'s training and of the evaluation (synthetic, udds, hwfet, "
-        "...; udds and hwfet need the data extra)",
+        "...; udds and hwfet are the bundled EPA cycles)",
     )
     parser.add_argument(
         "--fps-iterations", type=int, default=5, help="MAPPO iterations timed (0: no frames/s)"

@@ -4,25 +4,21 @@ Bad configs are checked in-process through ``cli.main`` as well (same code path,
 torch's import time once per case) and, for a few cases, in a subprocess for the real exit
 code and stderr.
 
-Tests marked ``needs_training`` run the real entry points of ``vdtn_marl.algos.api`` (a smoke
-`train` then `eval`, a two-job joblib sweep); they skip themselves only if those entry points
-are stubs again. The tests named ``*_fake_entry_points`` check CLI plumbing that does not depend
-on training (the submitit and Ray launchers) with a fake ``api`` installed by a
-``sitecustomize`` module on PYTHONPATH, so that launcher worker processes see it too; that keeps
-them fast. The resume test patches ``api.jocc`` in-process.
+The tests named ``*_real`` run the real entry points of ``vdtn_marl.algos.api`` (a smoke
+`train` then `eval`, a two-job joblib sweep). The tests named ``*_fake_entry_points`` check CLI
+plumbing that does not depend on training (the submitit and Ray launchers) with a fake ``api``
+installed by a ``sitecustomize`` module on PYTHONPATH, so that launcher worker processes see it
+too; that keeps them fast. The resume test patches ``api.jocc`` in-process.
 """
 
 from __future__ import annotations
 
-import ast
 import csv
 import importlib.util
-import inspect
 import json
 import os
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -37,33 +33,6 @@ ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = Path(sys.executable).with_name("vdtn-marl")
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
-
-def _is_stub(function) -> bool:
-    """True when ``function``'s body is only a docstring and ``raise NotImplementedError``."""
-    tree = ast.parse(textwrap.dedent(inspect.getsource(function)))
-    body = [
-        node
-        for node in tree.body[0].body
-        if not (isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant))
-    ]
-    return (
-        len(body) == 1
-        and isinstance(body[0], ast.Raise)
-        and "NotImplementedError" in ast.dump(body[0])
-    )
-
-
-def _training_available(*names: str) -> bool:
-    """The entry points ``names`` of vdtn_marl.algos.api are implemented (not stubs)."""
-    from vdtn_marl.algos import api
-
-    return not any(_is_stub(getattr(api, name)) for name in names)
-
-
-needs_training = pytest.mark.skipif(
-    not _training_available("train", "jocc"),
-    reason="vdtn_marl.algos.api.train/jocc are still stubs (NotImplementedError)",
-)
 
 FAKE_API = '''
 import os
@@ -478,7 +447,6 @@ def test_ray_sweep_on_local_instance_fake_entry_points(tmp_path, fake_env):
 # --- runs and sweeps with the real entry points --------------------------------------------
 
 
-@needs_training
 def test_train_smoke_then_eval_real(tmp_path):
     result = run_cli("train", "experiment=smoke", "rra.kappa1=0.25", cwd=tmp_path)
     assert result.returncode == 0, result.stdout + result.stderr
@@ -500,7 +468,6 @@ def test_train_smoke_then_eval_real(tmp_path):
     assert (tmp_path / "eval_run" / "summary.json").is_file()
 
 
-@needs_training
 def test_joblib_sweep_two_jobs_real(tmp_path):
     result = run_cli(
         "-m", "jocc", "rra.kappa1=0,1", "experiment=smoke", "hydra/launcher=joblib",

@@ -11,7 +11,6 @@ import vdtn_marl
 from vdtn_marl import cli
 from vdtn_marl.algos.jocc import trace_sources
 from vdtn_marl.config import RunConfig, validate
-from vdtn_marl.data.cycles import cycles_available
 from vdtn_marl.data.profiles import load_train_eval_sources
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.twin import resolve_device
@@ -80,12 +79,6 @@ def test_bad_trace_settings_are_config_errors(scenario, fragment, tmp_path, monk
     with pytest.raises(ConfigError) as info:
         validate(_cfg(**scenario))
     assert fragment in str(info.value)
-
-
-@pytest.mark.skipif(cycles_available(), reason="the data extra is installed")
-def test_driving_cycle_without_the_data_extra_says_how_to_install_it():
-    with pytest.raises(ConfigError, match=r"pip install 'vdtn-marl\[data\]'"):
-        validate(_cfg(traces="udds"))
 
 
 @pytest.mark.parametrize(

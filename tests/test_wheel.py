@@ -19,7 +19,6 @@ from pathlib import Path
 
 import pytest
 import yaml
-from test_cli import _training_available  # tests/ is on sys.path (rootdir-relative imports)
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = ("pyproject.toml", "README.md", "LICENSE", "conf", "vdtn_marl")
@@ -88,6 +87,9 @@ def test_wheel_ships_every_config(installed):
     assert on_disk <= names, sorted(on_disk - names)
     assert "vdtn_marl/conf/hydra/launcher/joblib.yaml" in names
     assert "vdtn_marl/results.py" in names
+    cycles = {f"vdtn_marl/data/cycles/{p.name}" for p in (ROOT / "vdtn_marl/data/cycles").glob("*")}
+    assert cycles == {"vdtn_marl/data/cycles/udds.csv", "vdtn_marl/data/cycles/hwfet.csv"}
+    assert cycles <= names, sorted(cycles - names)
 
 
 def test_installed_package_comes_from_the_wheel(installed):
@@ -100,6 +102,17 @@ def test_installed_package_comes_from_the_wheel(installed):
     assert result.returncode == 0, result.stderr
     for line in result.stdout.split():
         assert Path(line).is_relative_to(installed["bin"].parent), line
+
+
+def test_installed_package_reads_its_bundled_driving_cycles(installed):
+    result = _run(
+        [installed["bin"] / "python", "-c",
+         "from vdtn_marl.data import load_driving_cycle; "
+         "print(load_driving_cycle('hwfet').duration_s)"],
+        cwd=installed["work"], env=installed["env"],
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert float(result.stdout) == 765.0
 
 
 def test_installed_cli_lists_envs(installed):
@@ -126,10 +139,6 @@ def test_installed_cli_composes_configs_from_the_wheel(installed):
     assert list(installed["work"].iterdir()) == []
 
 
-@pytest.mark.skipif(
-    not _training_available("jocc"),
-    reason="vdtn_marl.algos.api.jocc is still a stub (NotImplementedError)",
-)
 def test_installed_cli_smoke_run(installed):
     result = _run(
         [installed["bin"] / "vdtn-marl", "jocc", "experiment=smoke"],

@@ -111,6 +111,27 @@ def test_time_speed_csv(write_text):
     assert p.vehicle_id == "x" and p.duration_s == 1.0
 
 
+@pytest.mark.parametrize(
+    ("header", "value", "mps"),
+    [("speed_kmh", "90", 25.0), ("Speed_KPH", "36", 10.0), ("speed_mph", "56.7", 25.347168)],
+)
+def test_time_speed_csv_speed_units(write_text, header, value, mps):
+    """The speed column's header names its unit; speeds come out in m/s (1 mph = 0.44704 m/s)."""
+    (p,) = load_time_speed_csv(write_text("u.csv", f"time_s,{header}\n0,0\n1,{value}\n"))
+    np.testing.assert_allclose(p.speed_mps, [0.0, mps], rtol=1e-12)
+    assert p.source.endswith(("km/h)", "mph)"))
+
+
+def test_time_speed_csv_needs_exactly_one_speed_column(write_text):
+    path = write_text("two.csv", "time,speed,speed_kmh\n0,1,3.6\n")
+    with pytest.raises(TraceFormatError, match=r"^two\.csv: more than one speed column; allowed"):
+        load_time_speed_csv(path)
+    # 95 km/h in a column said to hold m/s: the hint says how to name the unit
+    path = write_text("kmh_as_mps.csv", "time,speed\n0,95\n")
+    with pytest.raises(TraceFormatError, match=r"above 70 m/s .*name the speed column by its unit"):
+        load_time_speed_csv(path)
+
+
 def test_file_stem():
     assert file_stem("a/01_tracks.csv.gz") == "01_tracks"
     assert file_stem("us101.zip") == "us101"

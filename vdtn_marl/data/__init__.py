@@ -1,14 +1,13 @@
 """Leader speed traces for the digital twin (docs/model.md §3).
 
-Named trace sets (:func:`get_trace_source`): ``"synthetic"`` and ``"constant"`` always;
-``"udds"`` and ``"hwfet"`` (standard EPA driving cycles) where the optional ``fastsim`` package
-is installed. Recorded data the user has (NGSIM, highD-style tracks, ``time,speed`` CSV) is
-read with :func:`load_trace_source` / :class:`NGSIMTraceSource`.
+Named trace sets (:func:`get_trace_source`): ``"synthetic"``, ``"constant"``, and the standard
+EPA driving cycles ``"udds"`` and ``"hwfet"`` (bundled, :mod:`vdtn_marl.data.cycles`).
+Recorded data the user has (NGSIM, highD-style tracks, ``time,speed`` CSV) is read with
+:func:`load_trace_source` / :class:`NGSIMTraceSource`.
 """
 
 from vdtn_marl.data.cycles import (
     CYCLES,
-    cycles_available,
     driving_cycle_info,
     driving_cycle_source,
     load_driving_cycle,
@@ -50,8 +49,6 @@ from vdtn_marl.data.traces import (
 
 
 def _register_cycles() -> None:
-    if not cycles_available():
-        return
     for name in CYCLES:
         register_trace_source(
             name, lambda name=name: driving_cycle_source(name), driving_cycle_info(name)
@@ -74,7 +71,6 @@ __all__ = [
     "TraceFormatError",
     "TraceInfo",
     "TraceSource",
-    "cycles_available",
     "driving_cycle_info",
     "driving_cycle_source",
     "get_trace_source",

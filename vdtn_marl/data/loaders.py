@@ -21,6 +21,16 @@ import numpy as np
 
 FT_TO_M = 0.3048
 """Feet to metres (exact, international foot)."""
+MPH_TO_MPS = 0.44704
+"""Miles per hour to m/s (exact, international mile: 1609.344 m per 3600 s)."""
+KMH_TO_MPS = 1.0 / 3.6
+"""km/h to m/s."""
+SPEED_COLUMNS = {
+    "speed_mps": (("speed", "speed_mps"), 1.0),
+    "speed_kmh": (("speed_kmh", "speed_kph"), KMH_TO_MPS),
+    "speed_mph": (("speed_mph",), MPH_TO_MPS),
+}
+"""Speed column of a ``time,speed`` CSV by unit: accepted headers and the factor to m/s."""
 MAX_SPEED_MPS = 70.0
 """Highest speed accepted from a file (252 km/h); anything faster is taken as a unit mix-up."""
 NGSIM_FRAME_PERIOD_S = 0.1
@@ -86,13 +96,9 @@ class TraceFormatError(ValueError):
 
 
 def _pandas() -> Any:
-    try:
-        import pandas as pd
-    except ImportError as exc:  # pragma: no cover - pandas is present in the dev environment
-        raise ImportError(
-            "reading trace files needs pandas: pip install 'vdtn-marl[data]' (or pip install "
-            "pandas)"
-        ) from exc
+    """pandas, imported on first use (it is slow to import and only the readers need it)."""
+    import pandas as pd
+
     return pd
 
 
@@ -109,6 +115,16 @@ def file_stem(path: str | Path) -> str:
     return name
 
 
+def _header(path: Path) -> list[Any]:
+    """The column names of a CSV file (raises :class:`TraceFormatError` if unreadable)."""
+    try:
+        return list(_pandas().read_csv(path, nrows=0, compression="infer").columns)
+    except FileNotFoundError:
+        raise
+    except (ValueError, OSError, UnicodeDecodeError) as exc:
+        raise TraceFormatError(path, None, f"not a readable CSV file ({exc})") from None
+
+
 def _read_columns(
     path: str | Path,
     wanted: dict[str, Sequence[str]],
@@ -121,13 +137,8 @@ def _read_columns(
     """
     pd = _pandas()
     path = Path(path)
-    try:
-        header = pd.read_csv(path, nrows=0, compression="infer")
-    except FileNotFoundError:
-        raise
-    except (ValueError, OSError, UnicodeDecodeError) as exc:
-        raise TraceFormatError(path, None, f"not a readable CSV file ({exc})") from None
-    by_key = {str(c).strip().lower(): c for c in header.columns}
+    header = _header(path)
+    by_key = {str(c).strip().lower(): c for c in header}
     chosen: dict[str, Any] = {}
     for canonical, spellings in {**wanted, **(optional or {})}.items():
         for spelling in spellings:
@@ -136,7 +147,7 @@ def _read_columns(
                 break
         else:
             if canonical in wanted:
-                have = ", ".join(str(c).strip() for c in header.columns) or "none"
+                have = ", ".join(str(c).strip() for c in header) or "none"
                 raise TraceFormatError(
                     path,
                     None,
@@ -332,18 +343,30 @@ def load_highd(
 
 
 def load_time_speed_csv(path: str | Path, *, vehicle_id: str | None = None) -> list[SpeedProfile]:
-    """Read a ``time,speed`` CSV (header required; time in s, speed in m/s) as one profile.
+    """Read a ``time,speed`` CSV (header required) as one profile, speeds converted to m/s.
 
-    Headers ``time``/``time_s`` and ``speed``/``speed_mps`` are accepted, other columns are
-    ignored. Time must be non-decreasing (repeated times are allowed and later dropped by
-    :func:`~vdtn_marl.data.preprocess.preprocess`); a speed above 70 m/s or below 0 is
-    rejected as a likely km/h or ft/s mix-up. ``vehicle_id`` defaults to the file name without
-    extensions.
+    Headers: ``time``/``time_s`` (s), and exactly one speed column whose header gives its
+    unit: ``speed``/``speed_mps`` (m/s), ``speed_kmh``/``speed_kph`` (km/h) or ``speed_mph``
+    (mph; the bundled EPA cycles are stored so). Other columns are ignored. Time must be
+    non-decreasing (repeated times are allowed and later dropped by
+    :func:`~vdtn_marl.data.preprocess.preprocess`); a speed above 70 m/s or below 0 is rejected
+    as a likely unit mix-up. ``vehicle_id`` defaults to the file name without extensions.
     """
     path = Path(path)
-    cols, _ = _read_columns(path, {"time": ["time", "time_s"], "speed": ["speed", "speed_mps"]})
+    optional = {unit: headers for unit, (headers, _) in SPEED_COLUMNS.items()}
+    cols, _ = _read_columns(path, {"time": ["time", "time_s"]}, optional)
+    units = [unit for unit in SPEED_COLUMNS if unit in cols]
+    allowed = ", ".join(h for headers, _ in SPEED_COLUMNS.values() for h in headers)
+    if len(units) != 1:
+        problem = "missing column 'speed'" if not units else "more than one speed column"
+        have = ", ".join(str(c).strip() for c in _header(path)) or "none"
+        raise TraceFormatError(
+            path, None, f"{problem}; allowed: exactly one of {allowed} (columns found: {have})"
+        )
+    unit = units[0]
     t = _numeric(path, "time", cols["time"], " (s)")
-    v = _numeric(path, "speed", cols["speed"], " (m/s)")
+    label = unit.removeprefix("speed_").replace("mps", "m/s").replace("kmh", "km/h")
+    v = _numeric(path, "speed", cols[unit], f" ({label})") * SPEED_COLUMNS[unit][1]
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
         i = int(back[0]) + 1
@@ -353,10 +376,14 @@ def load_time_speed_csv(path: str | Path, *, vehicle_id: str | None = None) -> l
             f"time {t[i]:g} s is earlier than the previous row's {t[i - 1]:g} s "
             "(time must not decrease)",
         )
-    hint = "convert km/h to m/s by dividing by 3.6, ft/s by multiplying by 0.3048"
+    hint = (
+        "name the speed column by its unit: speed_mps (m/s), speed_kmh (km/h) or speed_mph"
+        if unit == "speed_mps"
+        else f"check that column {SPEED_COLUMNS[unit][0][0]!r} really holds {label}"
+    )
     _check_speeds(path, v, np.arange(len(v)), hint)
     vid = file_stem(path) if vehicle_id is None else vehicle_id
-    return [SpeedProfile(t, v, vid, f"time,speed CSV ({path.name})")]
+    return [SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {label})")]
 
 
 LOADERS = {"ngsim": load_ngsim, "highd": load_highd, "csv": load_time_speed_csv}

@@ -200,13 +200,8 @@ def _smooth(
 ) -> np.ndarray:
     if smoothing == "none":
         return speed.copy()
-    try:
-        from scipy import signal
-    except ImportError as exc:  # pragma: no cover - scipy is present in the dev environment
-        raise ImportError(
-            f"smoothing={smoothing!r} needs scipy: pip install 'vdtn-marl[data]' (or pip "
-            "install scipy), or pass smoothing='none'"
-        ) from exc
+    from scipy import signal
+
     if smoothing == "savgol":
         window = int(round(window_s / dt_s)) | 1  # odd
         smallest = polyorder + 1 if polyorder % 2 == 0 else polyorder + 2  # odd, > polyorder

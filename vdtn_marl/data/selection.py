@@ -14,7 +14,6 @@ from __future__ import annotations
 from functools import lru_cache
 from pathlib import Path
 
-from vdtn_marl.data.cycles import CYCLES
 from vdtn_marl.data.loaders import LOADERS
 from vdtn_marl.data.profiles import (
     ProfileTraceSource,
@@ -37,11 +36,6 @@ def check_trace_settings(traces: str, trace_path: str | None) -> None:
     if trace_path is None:
         if traces in trace_source_names():
             return
-        if traces in CYCLES:
-            raise ConfigError(
-                f"scenario.traces={traces!r} needs the optional package fastsim, which ships "
-                "the driving cycles: pip install 'vdtn-marl[data]'"
-            )
         if traces in FILE_FORMATS:
             raise ConfigError(
                 f"scenario.traces={traces!r} reads a file: set scenario.trace_path=FILE"
