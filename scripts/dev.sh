@@ -33,7 +33,8 @@ commands:
            in constraints.txt; a no-op when nothing changed since the last setup
   run      setup, then the default JOCC experiment: vdtn-marl jocc [OVERRIDES]
   test     setup, then ruff check . and python -m pytest -q [ARGS]
-  bench    setup, then python benchmarks/throughput.py [ARGS]
+  bench    setup, then python benchmarks/throughput.py --out outputs/benchmarks/throughput.json
+           [ARGS] (pass --out benchmarks/results/throughput.json to update the record)
 EOF
 }
 
@@ -135,7 +136,8 @@ case "$command" in
     ;;
   bench)
     cmd_setup
-    exec "$VENV_PY" benchmarks/throughput.py "$@"
+    # Writes under outputs/ so a checkout stays clean; a later --out in ARGS wins.
+    exec "$VENV_PY" benchmarks/throughput.py --out outputs/benchmarks/throughput.json "$@"
     ;;
   -h | --help | help)
     usage
