@@ -14,6 +14,7 @@ from vdtn_marl.data import (
     TraceSource,
     get_trace_source,
     load_trace_source,
+    load_train_eval_sources,
     split,
 )
 from vdtn_marl.data.profiles import is_eval, split_key
@@ -172,3 +173,32 @@ def test_load_trace_source_kinds(write_text, write_ngsim):
         load_trace_source("ngsimm", path)
     with pytest.raises(ValueError, match="no ngsim profile left"):
         load_trace_source("ngsim", _ngsim_file(write_ngsim, 2, 10), min_duration_s=60.0)
+
+
+def test_selection_keywords_work_for_every_format_and_unknown_ones_are_named(write_text):
+    path = write_text(
+        "drive.csv", "time,speed\n" + "".join(f"{t},{15 + 0.01 * t}\n" for t in range(61))
+    )
+    assert len(load_trace_source("csv", path, min_duration_s=60, speed_range_mps=(5, 30))) == 1
+    with pytest.raises(ValueError, match="no csv profile left"):
+        load_trace_source("csv", path, min_duration_s=61)
+    with pytest.raises(ValueError, match=r"^frame_rate_hz=25 is not a keyword of the 'csv' "):
+        load_trace_source("csv", path, frame_rate_hz=25)
+
+
+def test_one_drive_splits_in_time_through_the_python_api_as_on_the_cli(write_text):
+    """A file whose profiles all land in one part of the id split (one drive) is split in time
+    by load_trace_source(part=...) exactly as by load_train_eval_sources (the CLI's path)."""
+    path = write_text(
+        "drive.csv", "time,speed\n" + "".join(f"{t},{15 + 0.01 * t}\n" for t in range(101))
+    )
+    train, evaluation = load_train_eval_sources("csv", path)
+    for part, expected in (("train", train), ("eval", evaluation)):
+        src = load_trace_source("csv", path, part=part)
+        (profile,) = src.profiles
+        (same,) = expected.profiles
+        np.testing.assert_array_equal(profile.time_s, same.time_s)
+        assert profile.vehicle_id == f"drive@{part}" and "first 80%" in src.info.description
+    (head,), (tail,) = train.profiles, evaluation.profiles
+    assert head.time_s[-1] == tail.time_s[0] == pytest.approx(80.0)
+    assert load_trace_source("csv", path, part="all").profiles[0].duration_s == 100.0

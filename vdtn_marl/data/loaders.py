@@ -342,7 +342,13 @@ def load_highd(
     return _select(out, vehicle_ids, min_duration_s, speed_range_mps)
 
 
-def load_time_speed_csv(path: str | Path, *, vehicle_id: str | None = None) -> list[SpeedProfile]:
+def load_time_speed_csv(
+    path: str | Path,
+    *,
+    vehicle_id: str | None = None,
+    min_duration_s: float = 0.0,
+    speed_range_mps: tuple[float, float] | None = None,
+) -> list[SpeedProfile]:
     """Read a ``time,speed`` CSV (header required) as one profile, speeds converted to m/s.
 
     Headers: ``time``/``time_s`` (s), and exactly one speed column whose header gives its
@@ -351,6 +357,8 @@ def load_time_speed_csv(path: str | Path, *, vehicle_id: str | None = None) -> l
     non-decreasing (repeated times are allowed and later dropped by
     :func:`~vdtn_marl.data.preprocess.preprocess`); a speed above 70 m/s or below 0 is rejected
     as a likely unit mix-up. ``vehicle_id`` defaults to the file name without extensions.
+    ``min_duration_s`` and ``speed_range_mps`` select as in :func:`load_ngsim` (the list is
+    empty when the drive does not pass them).
     """
     path = Path(path)
     optional = {unit: headers for unit, (headers, _) in SPEED_COLUMNS.items()}
@@ -383,7 +391,8 @@ def load_time_speed_csv(path: str | Path, *, vehicle_id: str | None = None) -> l
     )
     _check_speeds(path, v, np.arange(len(v)), hint)
     vid = file_stem(path) if vehicle_id is None else vehicle_id
-    return [SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {label})")]
+    profile = SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {label})")
+    return _select([(vid, profile)], None, min_duration_s, speed_range_mps)
 
 
 LOADERS = {"ngsim": load_ngsim, "highd": load_highd, "csv": load_time_speed_csv}

@@ -8,6 +8,7 @@ an eval part by a fixed, versioned rule; :func:`load_trace_source` builds a sour
 from __future__ import annotations
 
 import hashlib
+import inspect
 import re
 from collections.abc import Sequence
 from dataclasses import replace
@@ -177,6 +178,13 @@ def load_profiles(
         loader = LOADERS[kind]
     except KeyError:
         raise ValueError(f"kind={kind!r} must be one of {', '.join(sorted(LOADERS))}") from None
+    allowed = [k for k in inspect.signature(loader).parameters if k != "path"]
+    unknown = sorted(set(loader_kw) - set(allowed))
+    if unknown:
+        raise ValueError(
+            f"{unknown[0]}={loader_kw[unknown[0]]!r} is not a keyword of the {kind!r} reader; "
+            f"allowed: {', '.join(allowed)}"
+        )
     profiles = loader(path, **loader_kw)
     if clean:
         profiles, _ = preprocess_all(profiles, **(preprocess_kw or {}))
@@ -193,20 +201,39 @@ def load_trace_source(
     preprocess_kw: dict[str, Any] | None = None,
     **loader_kw: Any,
 ) -> ProfileTraceSource:
-    """A :class:`ProfileTraceSource` over a user's file; arguments as in :func:`load_profiles`.
+    """A :class:`ProfileTraceSource` over one part of a user's file (arguments as in
+    :func:`load_profiles`); the parts are those of :func:`load_train_eval_sources`, so a file
+    whose profiles all land in one part of the split (one drive) is split in time.
 
     Example: ``load_trace_source("ngsim", "trajectories-0750am-0805am.csv", part="train",
     min_duration_s=60, speed_range_mps=(5, 30))``.
     """
+    if part not in ("train", "eval", "all"):
+        raise ValueError(f"part={part!r} must be 'train', 'eval' or 'all'")
+    profiles = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
+    if part == "all":
+        return _file_source(kind, path, profiles, "part=all", too_short)
+    parts, how = train_eval_parts(profiles)
+    return _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
+
+
+def _selected_profiles(
+    kind: str,
+    path: str | Path,
+    clean: bool,
+    preprocess_kw: dict[str, Any] | None,
+    loader_kw: dict[str, Any],
+) -> list[SpeedProfile]:
+    """Every profile of the file that passes selection and cleaning (raises if none does)."""
     profiles = load_profiles(
-        kind, path, part=part, clean=clean, preprocess_kw=preprocess_kw, **loader_kw
+        kind, path, part="all", clean=clean, preprocess_kw=preprocess_kw, **loader_kw
     )
     if not profiles:
         raise ValueError(
-            f"{Path(path).name}: no {kind} profile left after selection, cleaning and "
-            f"part={part!r}; loosen the selection (e.g. min_duration_s, speed_range_mps)"
+            f"{Path(path).name}: no {kind} profile left after selection and cleaning; "
+            "loosen the selection (e.g. min_duration_s, speed_range_mps)"
         )
-    return _file_source(kind, path, profiles, f"part={part}, split v{SPLIT_VERSION}", too_short)
+    return profiles
 
 
 def _file_source(
@@ -263,6 +290,21 @@ def time_split_sources(
     return parts[0], parts[1]
 
 
+def train_eval_parts(
+    profiles: Sequence[SpeedProfile],
+) -> tuple[dict[str, list[SpeedProfile]], str]:
+    """``({"train": [...], "eval": [...]}, how)``: the profiles divided by the split rule
+    (:func:`split`), or, when every profile lands in the same part (a file with one vehicle,
+    say), each profile split in time (:func:`time_split`: its first 80 % trains, its last 20 %
+    evaluates), so that evaluation never sees the stretch of road it was trained on."""
+    parts = {part: split(profiles, part) for part in ("train", "eval")}
+    if parts["train"] and parts["eval"]:
+        return parts, f"split v{SPLIT_VERSION}"
+    return {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}, (
+        TIME_SPLIT_HOW
+    )
+
+
 def load_train_eval_sources(
     kind: str,
     path: str | Path,
@@ -275,24 +317,10 @@ def load_train_eval_sources(
     """Training and evaluation sources from one file, read once (arguments as in
     :func:`load_trace_source`).
 
-    Profiles are divided by the split rule (:func:`split`). When every profile lands in the
-    same part (a file with one vehicle, say), each profile is split in time instead
-    (:func:`time_split`: its first 80 % trains, its last 20 % evaluates), so that evaluation
-    still never sees the stretch of road it was trained on.
+    The parts are those of :func:`train_eval_parts`.
     """
-    profiles = load_profiles(
-        kind, path, part="all", clean=clean, preprocess_kw=preprocess_kw, **loader_kw
-    )
-    if not profiles:
-        raise ValueError(
-            f"{Path(path).name}: no {kind} profile left after selection and cleaning; "
-            "loosen the selection (e.g. min_duration_s, speed_range_mps)"
-        )
-    parts = {part: split(profiles, part) for part in ("train", "eval")}
-    how = f"split v{SPLIT_VERSION}"
-    if not parts["train"] or not parts["eval"]:
-        parts = {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}
-        how = TIME_SPLIT_HOW
+    profiles = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
+    parts, how = train_eval_parts(profiles)
     train, evaluation = (
         _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
         for part in ("train", "eval")
