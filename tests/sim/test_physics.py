@@ -282,7 +282,8 @@ def test_bad_twin_arguments_name_the_value(kwargs, fragment):
         ({"num_vehicles": 1}, "num_vehicles=1"),
         ({"driveline_lag_s": -0.1}, "driveline_lag_s=-0.1"),
         ({"cam_size_bits": 0}, "cam_size_bits=0"),
-        ({"no_such_key": 1}, "unknown model parameter 'no_such_key'"),
+        ({"no_such_key": 1}, "unknown model parameter 'no_such_key'; known: "),
+        ({"num_vehicle": 4}, "unknown model parameter 'num_vehicle'; did you mean 'num_vehicles'"),
     ],
 )
 def test_bad_model_parameters_name_key_and_range(override, fragment):

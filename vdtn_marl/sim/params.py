@@ -7,6 +7,7 @@ to change. Units are in the field names (``_m``, ``_s``, ``_mps``, ``_mps2``, ``
 
 from __future__ import annotations
 
+import difflib
 import math
 import numbers
 from dataclasses import asdict, dataclass, field, fields
@@ -213,5 +214,9 @@ class TwinParams:
                 top_kw[key] = value
             else:
                 known = sorted(platoon_keys | radio_keys | top_keys)
-                raise ConfigError(f"unknown model parameter {key!r}; known: {', '.join(known)}")
+                close = difflib.get_close_matches(str(key), known, n=1)
+                hint = f"; did you mean {close[0]!r}?" if close else ""
+                raise ConfigError(
+                    f"unknown model parameter {key!r}{hint}; known: {', '.join(known)}"
+                )
         return cls(PlatoonParams(**platoon_kw), RadioParams(**radio_kw), **top_kw).validate()
