@@ -548,6 +548,25 @@ def test_bench_summarize_of_empty_or_missing_dir_fails_clearly(tmp_path):
     assert result.returncode == 2 and "not a directory" in result.stderr
 
 
+def test_bench_summarize_lists_jobs_in_job_number_order(tmp_path):
+    """Hydra numbers a sweep's jobs 0..N-1: job 10 comes after job 9, not after job 1."""
+    from vdtn_marl.results import find_jobs, summarize_sweep
+
+    sweep = tmp_path / "sweep"
+    for job in range(12):
+        (sweep / str(job) / ".hydra").mkdir(parents=True)
+        (sweep / str(job) / "summary.json").write_text(json.dumps({"control_cost": job}))
+    (sweep / "12" / ".hydra").mkdir(parents=True)  # not finished: named in the note
+    (sweep / "13" / ".hydra").mkdir(parents=True)
+    expected = [str(job) for job in range(12)]
+    assert [p.name for p in find_jobs(sweep)] == [*expected, "12", "13"]
+    summary = summarize_sweep(sweep)  # no throughput key: the table only, no plot
+    assert list(summary.table["run"]) == expected
+    with open(summary.csv_path, newline="") as handle:
+        assert [row["run"] for row in csv.DictReader(handle)] == expected
+    assert summary.missing == ["12", "13"]
+
+
 def test_pareto_mask():
     from vdtn_marl.results import pareto_mask
 

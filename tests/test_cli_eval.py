@@ -317,6 +317,18 @@ def test_a_file_that_is_not_a_checkpoint_is_one_line(tmp_path, monkeypatch, caps
     assert "weights_only" not in line
 
 
+@pytest.mark.parametrize("name", ["config.yaml", "hello.txt"])
+def test_eval_of_a_text_file_is_one_line(name, tmp_path, monkeypatch, capsys):
+    # both start with a pickle opcode: torch's unpickler fails with KeyError / IndexError
+    path = tmp_path / name
+    path.write_text("hello" if name == "hello.txt" else "(algo:\n  name: mappo\n")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main(["eval", f"checkpoint={path}", "hydra.run.dir=ev"]) == 2
+    err = capsys.readouterr().err
+    _one_line(err, f"checkpoint={path}", "not a vdtn-marl checkpoint")
+    assert "Traceback" not in err
+
+
 def test_a_checkpoint_the_system_will_not_let_us_read_is_one_line(tmp_path, monkeypatch):
     import builtins
 

@@ -176,6 +176,46 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
     assert not (tmp_path / "run").exists()
 
 
+def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkeypatch):
+    from vdtn_marl.algos import jocc
+
+    run = tmp_path / "run"
+    (run / "checkpoints").mkdir(parents=True)
+    files = {"summary.json": '{"control_cost": 1.0}', "config.yaml": "seed: 0\n"}
+    files["metrics.csv"] = "iteration,control_cost\n0,1.0\n"
+    files["checkpoints/last.pt"] = "a finished run's checkpoint"
+    for name, text in files.items():
+        (run / name).write_text(text)
+
+    def fail(*args, **kwargs):
+        raise AssertionError("training started")
+
+    monkeypatch.setattr(jocc, "JointOptimisation", fail)
+    assert jocc.main(["--run-dir", str(run)]) == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1, lines
+    assert lines[0].startswith(f"error: --run-dir={run} already holds a run (config.yaml")
+    assert "allowed: --resume to continue it, or another --run-dir" in lines[0]
+    assert {name: (run / name).read_text() for name in files} == files
+    assert sorted(p.name for p in run.rglob("*")) == sorted(
+        ["checkpoints", "last.pt", "summary.json", "config.yaml", "metrics.csv"]
+    )
+
+    # --resume continues it: the loop is built (and resumes from checkpoints/last.pt itself)
+    calls = []
+
+    class Resumed:
+        def __init__(self, cfg, run_dir):
+            calls.append((cfg.resume, run_dir))
+
+        def run(self):
+            return {"control_cost": 1.0}
+
+    monkeypatch.setattr(jocc, "JointOptimisation", Resumed)
+    assert jocc.main(["--run-dir", str(run), "--resume"]) == 0
+    assert calls == [(True, str(run))]
+
+
 def test_a_recorded_trace_set_trains_and_evaluates_on_different_stretches(monkeypatch):
     """A named recorded set is one drive (a driving cycle): without a split, evaluation windows
     would be cut from the stretch that training drew from."""

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import io
 import math
+import re
 import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -109,7 +110,17 @@ def find_jobs(root: str | Path) -> list[Path]:
     jobs |= {p.parent for p in root.rglob(SUMMARY_FILE) if p.is_file()}
     # A multirun's top directory has no .hydra of its own, but guard against odd layouts:
     # a directory is a job only if no other job lies inside it.
-    return sorted(jobs, key=lambda p: (len(p.parts), str(p)))
+    return sorted(jobs, key=lambda p: (len(p.parts), _natural_key(p)))
+
+
+def _natural_key(path: Path) -> tuple[tuple[str | int, ...], ...]:
+    """Sort key reading the digits in ``path``'s parts as numbers: Hydra's job folders
+    0, 1, 2, ..., 10, 11 come in job order, not as text (0, 1, 10, 11, 2)."""
+    # re.split with a group alternates text (even places) and digits (odd places)
+    return tuple(
+        tuple(int(c) if i % 2 else c for i, c in enumerate(re.split(r"(\d+)", part)))
+        for part in path.parts
+    )
 
 
 def _read_yaml(path: Path) -> Any:
@@ -177,6 +188,31 @@ def is_finite(value: Any) -> bool:
     return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
+def _label_points(ax: Any, xs: list[float], ys: list[float], labels: list[str]) -> None:
+    """Label points to their right, moving labels up (with a leader line) so that labels of
+    points closer than a line of text apart do not print on top of each other."""
+    import numpy as np
+
+    ax.autoscale_view()
+    pixels = ax.transData.transform(np.column_stack([xs, ys]))
+    per_point = ax.figure.dpi / 72.0  # pixels per typographic point
+    gap = 11.0 * per_point  # one line of 8-point text
+    placed: list[tuple[float, float]] = []  # (x, y) pixels of labels already placed
+    for i in np.argsort(pixels[:, 1], kind="stable"):
+        x_px, y_px = pixels[i]
+        y_label = y_px
+        for px, py in sorted(placed, key=lambda p: p[1]):
+            if abs(px - x_px) < 60.0 * per_point and abs(py - y_label) < gap:
+                y_label = py + gap
+        placed.append((x_px, y_label))
+        shift = (y_label - y_px) / per_point
+        ax.annotate(
+            labels[i], (xs[i], ys[i]), textcoords="offset points", xytext=(8, shift),
+            fontsize=8, va="center",
+            arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.4"} if shift > 1 else None,
+        )  # fmt: skip
+
+
 def plot_kappa1_pareto(
     table: Any,
     path: str | Path,
@@ -218,14 +254,18 @@ def plot_kappa1_pareto(
         means = data.groupby(group_keys, dropna=False)[[x, y]].mean().reset_index()
     else:
         means = data[[x, y]].mean().to_frame().T
+    kappa_means = has_kappa and "rra.kappa1" in means.columns
     if len(data) > len(means):
-        ax.scatter(means[x], means[y], marker="D", s=40, facecolors="none", edgecolors="black",
-                   label="mean over seeds")  # fmt: skip
-    if "rra.kappa1" in means.columns:
-        for _, row in means.iterrows():
-            label = f"κ1={row['rra.kappa1']:g}"
-            ax.annotate(label, (row[x], row[y]), textcoords="offset points", xytext=(5, 4),
-                        fontsize=8)  # fmt: skip
+        colour = (
+            {"c": means["rra.kappa1"], "cmap": "viridis", "vmin": 0.0, "vmax": 1.0}
+            if kappa_means
+            else {"facecolors": "none"}
+        )
+        ax.scatter(means[x], means[y], marker="D", s=48, edgecolors="black", linewidths=1.0,
+                   label="mean over seeds", zorder=3, **colour)  # fmt: skip
+    if kappa_means:
+        labels = [f"κ1={k:g}" for k in means["rra.kappa1"]]
+        _label_points(ax, list(means[x]), list(means[y]), labels)
 
     front = means[pareto_mask(list(means[x]), list(means[y]))].sort_values(x)
     if len(front) > 1:

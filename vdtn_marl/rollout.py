@@ -56,8 +56,13 @@ def run(intervals: int, seed: int, kappa1: float, device: str) -> dict[str, floa
         "mean |gap error| (m)": statistics.fmean(gap) if gap else float("nan"),
         "mean |speed error| (m/s)": statistics.fmean(speed) if speed else float("nan"),
         "mean IVoI per interval": statistics.fmean(ivoi) if ivoi else float("nan"),
-        "control intervals": len(gap) / max(env.twin.num_followers, 1),
+        "control intervals": len(gap) // max(env.twin.num_followers, 1),  # a count
     }
+
+
+def format_value(value: float) -> str:
+    """A table cell: a count (an ``int``) as an integer, any other value with 3 decimals."""
+    return str(value) if isinstance(value, int) else f"{value:.3f}"
 
 
 def print_table(results: dict[str, float], title: str) -> None:
@@ -67,13 +72,13 @@ def print_table(results: dict[str, float], title: str) -> None:
     except ImportError:
         print(title)
         for key, value in results.items():
-            print(f"  {key:<34} {value:10.3f}")
+            print(f"  {key:<34} {format_value(value):>10}")
         return
     table = Table(title=title)
     table.add_column("metric")
     table.add_column("value", justify="right")
     for key, value in results.items():
-        table.add_row(key, f"{value:.3f}")
+        table.add_row(key, format_value(value))
     Console().print(table)
 
 

@@ -257,6 +257,31 @@ def test_truncated_foreign_and_mismatched_checkpoints_raise(tmp_path):
         load_checkpoint(good, other)
 
 
+def _savez(path):
+    import numpy as np
+
+    np.savez(path, returns=np.arange(3.0))
+
+
+@pytest.mark.parametrize(
+    "name, write",
+    [
+        ("config.yaml", lambda p: p.write_text("scenario:\n  num_vehicles: 4\nseed: 0\n")),
+        ("metrics.csv", lambda p: p.write_text("iteration,control_cost\n0,1.5\n1,1.25\n")),
+        ("hello.txt", lambda p: p.write_text("hello")),  # 'h': a memo lookup (KeyError: 101)
+        ("notes.txt", lambda p: p.write_text("(abc\n1,2\n")),  # "(": a mark (IndexError)
+        ("evaluation_raw.npz", _savez),  # a zip archive, but not torch's
+    ],
+)
+def test_files_that_are_not_checkpoints_are_named_as_such(name, write, tmp_path):
+    path = tmp_path / name
+    write(path)
+    with pytest.raises(CheckpointError, match="not a vdtn-marl checkpoint") as info:
+        load_checkpoint(path)
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+    assert "truncated" not in str(info.value)
+
+
 class RecordingEstimator:
     """A TD estimator with a fixed critic that keeps every ξ it returned."""
 

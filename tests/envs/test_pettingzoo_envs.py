@@ -209,6 +209,9 @@ def test_impaired_env_uses_given_rra_policy():
         (np.array([np.nan], np.float32), "outside"),
         (np.array([3.0], np.float32), r"\[-2.6, 2.6\]"),
         (np.array([0.0, 1.0], np.float32), "shape"),
+        ("left", r"vehicle_2 = 'left' must be one number \(m/s²\) in \[-2.6, 2.6\]"),
+        ("1.5", r"vehicle_2 = '1.5' must be one number"),  # not read as 1.5 m/s²
+        (None, r"vehicle_2 = None must be one number"),
     ],
 )
 def test_bad_vehicle_actions_raise(action, fragment):

@@ -11,6 +11,7 @@ from __future__ import annotations
 import io
 import logging
 import pickle
+import struct
 import zipfile
 from pathlib import Path
 from typing import Any
@@ -142,7 +143,7 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
         raise CheckpointError(f"checkpoint {str(path)!r} does not exist or is not a file")
     try:
         payload = torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, EOFError, pickle.UnpicklingError, zipfile.BadZipFile, OSError) as err:
+    except _LOAD_ERRORS as err:
         # torch's own message is many lines and suggests weights_only=False (which would run
         # the file's code): name the file and the problem only.
         raise CheckpointError(_unreadable(path, err)) from err
@@ -163,6 +164,28 @@ def load_checkpoint(path: str | Path, config: dict[str, Any] | None = None) -> d
     return payload
 
 
+#: What ``torch.load(weights_only=True)`` raises on a file it cannot read. Besides a damaged
+#: archive, a file that is not one (a config.yaml, a metrics.csv, any text) is read as a bare
+#: pickle whose first bytes happen to be opcodes: the weights-only unpickler then fails with
+#: whatever its stack or memo gives (``IndexError: pop from empty list``, ``KeyError: 101``,
+#: a ``UnicodeDecodeError``, a ``struct.error``).
+_LOAD_ERRORS = (
+    RuntimeError,
+    EOFError,
+    pickle.UnpicklingError,
+    zipfile.BadZipFile,
+    OSError,
+    KeyError,
+    IndexError,
+    ValueError,
+    struct.error,
+)
+
+#: Start of a zip archive's first local file header, and that header's size in bytes.
+_ZIP_MAGIC = b"PK\x03\x04"
+_ZIP_HEADER = 30
+
+
 def _unreadable(path: Path, err: BaseException) -> str:
     """Why torch cannot read ``path``, in one line: a damaged torch archive, one holding other
     objects than tensors and plain containers, another kind of file, or one the system does
@@ -170,9 +193,18 @@ def _unreadable(path: Path, err: BaseException) -> str:
     name = repr(str(path))
     try:
         with open(path, "rb") as handle:
-            zipped = handle.read(4) == b"PK\x03\x04"  # the zip archive torch.save writes
+            header = handle.read(_ZIP_HEADER)
+            zipped = header[:4] == _ZIP_MAGIC  # the zip archive torch.save writes
+            first = _first_zip_entry(handle, header) if zipped else None
     except OSError as exc:
         return f"checkpoint {name} cannot be read ({exc.strerror or exc})"
+    if zipped and first is not None and not first.endswith(b"data.pkl"):
+        # torch.save writes its pickle as the archive's first entry: this zip is another
+        # kind (an evaluation_raw.npz, a zipped folder), whole or not
+        return (
+            f"checkpoint {name} is not a vdtn-marl checkpoint (a zip archive not written by "
+            "torch.save)"
+        )
     if zipped and isinstance(err, pickle.UnpicklingError):
         return (
             f"checkpoint {name} is not a vdtn-marl checkpoint (a torch file holding objects "
@@ -181,3 +213,13 @@ def _unreadable(path: Path, err: BaseException) -> str:
     if zipped:
         return f"checkpoint {name} is truncated or damaged (its torch archive cannot be read)"
     return f"checkpoint {name} is not a vdtn-marl checkpoint (not a file written by torch.save)"
+
+
+def _first_zip_entry(handle: io.BufferedReader, header: bytes) -> bytes | None:
+    """Name of the first entry of the zip archive whose first ``header`` bytes were read
+    from ``handle`` (positioned just after them); None where the file ends before it."""
+    if len(header) < _ZIP_HEADER:
+        return None
+    (length,) = struct.unpack("<H", header[26:28])  # file name length, in bytes
+    entry = handle.read(length)  # the name follows the fixed-size header
+    return entry if len(entry) == length else None

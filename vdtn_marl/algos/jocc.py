@@ -29,6 +29,7 @@ Run ``python -m vdtn_marl.algos.jocc`` for one JOCC iteration with the default s
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -69,6 +70,7 @@ from vdtn_marl.runs import (
     atomic_write_json,
     logged_stage,
     progress,
+    run_outputs,
 )
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
@@ -587,11 +589,17 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m vdtn_marl.algos.jocc",
         description="One JOCC iteration with the default small budgets; prints the metrics.",
     )
-    parser.add_argument("--run-dir", default="runs/jocc", help="output directory")
+    parser.add_argument(
+        "--run-dir",
+        default="runs/jocc",
+        help="output directory; one that already holds a run is refused unless --resume",
+    )
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--kappa1", type=float, default=0.5)
     parser.add_argument("--device", default="cpu")
-    parser.add_argument("--resume", action="store_true")
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"
+    )
     args = parser.parse_args(argv)
     cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
     cfg.rra.kappa1 = args.kappa1
@@ -600,6 +608,15 @@ def main(argv: list[str] | None = None) -> int:
         validate_device(cfg.device)
     except ConfigError as exc:
         parser.error(str(exc))
+    found = run_outputs(args.run_dir)
+    if found and not args.resume:
+        # training afresh would overwrite its checkpoints and metrics (as the CLI refuses to)
+        print(
+            f"error: --run-dir={args.run_dir} already holds a run ({', '.join(found)}); "
+            "allowed: --resume to continue it, or another --run-dir",
+            file=sys.stderr,
+        )
+        return 2
     summary = JointOptimisation(cfg, args.run_dir).run()
     print(format_table(summary))
     print(f"outputs: {Path(args.run_dir).resolve()}")

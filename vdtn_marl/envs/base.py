@@ -146,7 +146,16 @@ class VDTNParallelEnv(ParallelEnv):
             raise KeyError(f"missing actions for {missing}")
         out = np.empty(len(names), np.float32)
         for i, name in enumerate(names):
-            value = np.asarray(actions[name], dtype=np.float64)
+            try:
+                value = np.asarray(actions[name])
+            except (TypeError, ValueError):  # e.g. a ragged list
+                value = None
+            if value is None or value.dtype.kind not in "biuf":  # a string ("left"), None
+                raise ValueError(
+                    f"action of {name} = {actions[name]!r} must be one number (m/s²) in "
+                    f"[{pp.accel_min_mps2}, {pp.accel_max_mps2}]"
+                )
+            value = value.astype(np.float64, copy=False)
             if value.shape not in ((1,), ()):
                 raise ValueError(f"action of {name} has shape {value.shape}, expected (1,)")
             u = float(value.reshape(()))

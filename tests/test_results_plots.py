@@ -1,0 +1,31 @@
+"""Plot helpers of vdtn_marl.results that the end-to-end CLI tests cannot check by eye."""
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pytest  # noqa: E402
+
+from vdtn_marl.results import _label_points  # noqa: E402
+
+
+def _offsets(xs, ys):
+    fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
+    ax.scatter(xs, ys)
+    ax.set_xlim(0.0, 10.0)
+    ax.set_ylim(0.0, 10.0)
+    _label_points(ax, xs, ys, [f"κ1={i}" for i in range(len(xs))])
+    offsets = {a.get_text(): a.xyann[1] for a in ax.texts}
+    plt.close(fig)
+    return [offsets[f"κ1={i}"] for i in range(len(xs))]
+
+
+def test_labels_of_coinciding_points_are_stacked_a_line_apart():
+    shifts = sorted(_offsets([5.0, 5.0, 5.0, 5.01], [5.0, 5.0, 5.01, 5.0]))
+    assert shifts[0] == pytest.approx(0.0, abs=1.0)
+    gaps = [b - a for a, b in zip(shifts, shifts[1:], strict=False)]
+    assert min(gaps) >= 10.5  # one line of 8-point text apart (in points)
+
+
+def test_labels_of_distant_points_stay_at_their_points():
+    assert _offsets([1.0, 9.0, 5.0], [1.0, 9.0, 5.0]) == [0.0, 0.0, 0.0]
