@@ -25,12 +25,23 @@ MPH_TO_MPS = 0.44704
 """Miles per hour to m/s (exact, international mile: 1609.344 m per 3600 s)."""
 KMH_TO_MPS = 1.0 / 3.6
 """km/h to m/s."""
-SPEED_COLUMNS = {
-    "speed_mps": (("speed", "speed_mps"), 1.0),
-    "speed_kmh": (("speed_kmh", "speed_kph"), KMH_TO_MPS),
-    "speed_mph": (("speed_mph",), MPH_TO_MPS),
-}
-"""Speed column of a ``time,speed`` CSV by unit: accepted headers and the factor to m/s."""
+
+
+@dataclass(frozen=True)
+class SpeedColumn:
+    """A speed column of a ``time,speed`` CSV: accepted headers, its unit, the factor to m/s."""
+
+    headers: tuple[str, ...]
+    unit: str
+    to_mps: float
+
+
+SPEED_COLUMNS = (
+    SpeedColumn(("speed", "speed_mps"), "m/s", 1.0),
+    SpeedColumn(("speed_kmh", "speed_kph"), "km/h", KMH_TO_MPS),
+    SpeedColumn(("speed_mph",), "mph", MPH_TO_MPS),
+)
+"""The speed columns a ``time,speed`` CSV may have (exactly one of them)."""
 MAX_SPEED_MPS = 70.0
 """Highest speed accepted from a file (252 km/h); anything faster is taken as a unit mix-up."""
 NGSIM_FRAME_PERIOD_S = 0.1
@@ -361,20 +372,19 @@ def load_time_speed_csv(
     empty when the drive does not pass them).
     """
     path = Path(path)
-    optional = {unit: headers for unit, (headers, _) in SPEED_COLUMNS.items()}
+    optional = {c.unit: c.headers for c in SPEED_COLUMNS}
     cols, _ = _read_columns(path, {"time": ["time", "time_s"]}, optional)
-    units = [unit for unit in SPEED_COLUMNS if unit in cols]
-    allowed = ", ".join(h for headers, _ in SPEED_COLUMNS.values() for h in headers)
-    if len(units) != 1:
-        problem = "missing column 'speed'" if not units else "more than one speed column"
+    found = [c for c in SPEED_COLUMNS if c.unit in cols]
+    allowed = ", ".join(h for c in SPEED_COLUMNS for h in c.headers)
+    if len(found) != 1:
+        problem = "missing column 'speed'" if not found else "more than one speed column"
         have = ", ".join(str(c).strip() for c in _header(path)) or "none"
         raise TraceFormatError(
             path, None, f"{problem}; allowed: exactly one of {allowed} (columns found: {have})"
         )
-    unit = units[0]
+    (column,) = found
     t = _numeric(path, "time", cols["time"], " (s)")
-    label = unit.removeprefix("speed_").replace("mps", "m/s").replace("kmh", "km/h")
-    v = _numeric(path, "speed", cols[unit], f" ({label})") * SPEED_COLUMNS[unit][1]
+    v = _numeric(path, "speed", cols[column.unit], f" ({column.unit})") * column.to_mps
     back = np.flatnonzero(np.diff(t) < 0)
     if back.size:
         i = int(back[0]) + 1
@@ -386,12 +396,12 @@ def load_time_speed_csv(
         )
     hint = (
         "name the speed column by its unit: speed_mps (m/s), speed_kmh (km/h) or speed_mph"
-        if unit == "speed_mps"
-        else f"check that column {SPEED_COLUMNS[unit][0][0]!r} really holds {label}"
+        if column.to_mps == 1.0
+        else f"check that column {column.headers[0]!r} really holds {column.unit}"
     )
     _check_speeds(path, v, np.arange(len(v)), hint)
     vid = file_stem(path) if vehicle_id is None else vehicle_id
-    profile = SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {label})")
+    profile = SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {column.unit})")
     return _select([(vid, profile)], None, min_duration_s, speed_range_mps)
 
 

@@ -300,9 +300,8 @@ def train_eval_parts(
     parts = {part: split(profiles, part) for part in ("train", "eval")}
     if parts["train"] and parts["eval"]:
         return parts, f"split v{SPLIT_VERSION}"
-    return {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}, (
-        TIME_SPLIT_HOW
-    )
+    in_time = {part: [time_split(p, part) for p in profiles] for part in ("train", "eval")}
+    return in_time, TIME_SPLIT_HOW
 
 
 def load_train_eval_sources(
