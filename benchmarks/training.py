@@ -1,6 +1,7 @@
 """Training benchmark: MAPPO frames/s, and the control cost of learned π* against the oracle.
 
     python benchmarks/training.py                      # full run, writes results/training.json
+    python benchmarks/training.py --traces synthetic --output results/training_synthetic.json
     python benchmarks/training.py --iterations 5 --quick
     python benchmarks/training.py --warm-starts '' --preview-s '' --fps-iterations 0 \
         --output baselines.json  # baselines only: no π*, no frames/s
@@ -10,8 +11,9 @@ Figures:
   (default 256; one frame = one scenario-step, i.e. F vehicle-agent steps), and through
   TorchRL's ``PettingZooWrapper`` around the registered ``vdtn/platoon-control-v0`` (B = 1);
 - control cost (−mean reward per follower and interval, perfect observation, held-out
-  scenarios of ``--traces``) of π* after ``--iterations`` MAPPO iterations (one run per
-  ``--pi-seeds`` seed, all evaluated on the same scenarios; mean, best and worst), of linear
+  scenarios of ``--traces``, by default the held-out end of the EPA city cycle) of π* after
+  ``--iterations`` MAPPO iterations (one run per ``--pi-seeds`` seed, all evaluated on the
+  same scenarios; mean, best and worst), of linear
   CACC, of the exact oracle (the minimum of the evaluated cost over the known leader trace, a
   linear program per scenario, planned 6 s beyond the evaluated intervals: the lower bound),
   of the MPC oracle (``control=oracle``: receding 6 s horizon over the known leader trace,
@@ -210,9 +212,10 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument(
         "--traces",
-        default="synthetic",
-        help="leader trace set of π*'s training and of the evaluation (synthetic, udds, hwfet, "
-        "...; udds and hwfet are the bundled EPA cycles)",
+        default=ScenarioConfig().traces,
+        help="leader trace set of π*'s training and of the evaluation (default: the scenarios' "
+        "default, udds; hwfet, synthetic, ...; udds and hwfet are the bundled EPA cycles, which "
+        "train on the first 80 %% of the drive and evaluate on its last 20 %%)",
     )
     parser.add_argument(
         "--fps-iterations", type=int, default=5, help="MAPPO iterations timed (0: no frames/s)"

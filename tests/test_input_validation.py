@@ -66,7 +66,7 @@ def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch
     [
         (dict(traces="foo"), "scenario.traces='foo' is not a known trace set"),
         (dict(traces="csv"), "scenario.traces='csv' reads a file"),
-        (dict(trace_path="drive.csv"), "scenario.traces='synthetic' cannot read"),
+        (dict(trace_path="drive.csv"), "scenario.traces='udds' cannot read"),
         (dict(traces="csv", trace_path="no/such.csv"), "scenario.trace_path='no/such.csv'"),
         (dict(traces="csv", trace_path="bad.csv"), "bad.csv row 3: time 1 s is earlier"),
         (dict(traces="ngsim", trace_path="drive.csv"), "(ngsim)"),

@@ -39,7 +39,8 @@ TINY_EXPERIMENT = ExperimentConfig(
 def checkpoint(tmp_path_factory) -> Path:
     run_dir = tmp_path_factory.mktemp("jocc")
     cfg = RunConfig(
-        scenario=ScenarioConfig(episode_intervals=20),
+        # synthetic traces: every one of a few random-RRA episodes delivers some CAMs
+        scenario=ScenarioConfig(episode_intervals=20, traces="synthetic"),
         algo=TINY_ALGO,
         experiment=TINY_EXPERIMENT,
         progress=False,
