@@ -296,6 +296,8 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert f"`{b.name}` v{b.version}" in text
     assert "vdtn-marl bench benchmark=smoke" in text
     assert "## platoon4" in text and "**" in text  # a table per scenario, best marked
+    assert "- **leader traces**: platoon4: `udds` (EPA Urban" in text  # the scenario's default
+    assert "training draws from the first 80% of each drive" in text
     for method in b.methods:
         assert f"| {method} |" in text
     for kind in PLOT_KINDS:
@@ -338,3 +340,25 @@ def test_script_forwards_to_the_cli():
     )  # fmt: skip
     assert result.returncode == 0
     assert "bench benchmark=NAME" in result.stdout
+
+
+def test_report_names_each_scenarios_leader_traces():
+    from vdtn_marl.leaderboard.report import _traces_line
+
+    def cell(scenario, traces, trace_path=None):
+        data = {"scenario": {"traces": traces, "trace_path": trace_path}}
+        return leaderboard.Cell(scenario, "m", 0, ()), (data, None)
+
+    composed = dict(
+        [
+            cell("a", "synthetic"),
+            cell("b", "udds"),
+            cell("c", "synthetic"),
+            cell("d", "csv", "data/drive.csv"),
+        ]
+    )
+    line = _traces_line(composed)
+    assert line.startswith("- **leader traces**: a, c: `synthetic` (bounded stochastic")
+    assert "evaluation draws traces training never saw); b: `udds` (EPA Urban" in line
+    assert "the first 80% of each drive, evaluation from the last 20%)" in line
+    assert line.endswith("d: `csv` file `drive.csv`, divided into train and eval parts")

@@ -14,6 +14,8 @@ from typing import Any
 
 from vdtn_marl import __version__
 from vdtn_marl.config import BenchConfig
+from vdtn_marl.data.profiles import TIME_SPLIT_TRAIN_FRACTION
+from vdtn_marl.data.traces import trace_set_provenance
 from vdtn_marl.leaderboard.grid import (
     METRICS,
     Cell,
@@ -88,6 +90,7 @@ def _budget_lines(
         "every method (evaluation seed = run seed + 10⁹)",
         f"- **seeds**: {', '.join(str(s) for s in b.seeds)} ({len(b.seeds)} runs per scenario "
         "× method)",
+        _traces_line(composed),
     ]
     if seconds:
         lines.append(
@@ -97,6 +100,33 @@ def _budget_lines(
             f"{os.cpu_count()} CPU cores"
         )
     return lines
+
+
+def _traces_line(composed: Mapping) -> str:
+    """The leader traces of each scenario, as composed (``scenario.traces``/``trace_path``),
+    with the trace set's provenance and how training and evaluation divide it."""
+    settings: dict[tuple[str, str | None], list[str]] = {}
+    for cell, (data, _) in composed.items():
+        key = (data["scenario"]["traces"], data["scenario"].get("trace_path"))
+        if cell.scenario not in settings.setdefault(key, []):
+            settings[key].append(cell.scenario)
+    provenance = trace_set_provenance()
+    train = TIME_SPLIT_TRAIN_FRACTION
+    parts = []
+    for (traces, trace_path), scenarios in settings.items():
+        if trace_path:
+            what = f"`{traces}` file `{Path(trace_path).name}`, divided into train and eval parts"
+        elif traces in provenance and not provenance[traces]["synthetic"]:
+            what = (
+                f"`{traces}` ({provenance[traces]['description']}; recorded: training draws "
+                f"from the first {train:.0%} of each drive, evaluation from the last "
+                f"{1 - train:.0%})"
+            )
+        else:
+            info = provenance.get(traces, {}).get("description", "generated")
+            what = f"`{traces}` ({info}; generated: evaluation draws traces training never saw)"
+        parts.append(f"{', '.join(scenarios)}: {what}")
+    return "- **leader traces**: " + "; ".join(parts)
 
 
 def _png(path: Path) -> str:
