@@ -324,3 +324,12 @@ def test_symmetric_shadowing_draws_have_unit_variance_on_and_off_the_diagonal():
     assert ((variance - 1.0).abs() < 0.05).all(), variance
     g = torch.Generator().manual_seed(0)
     np.testing.assert_array_equal(channel.symmetric_normal((40_000, 4, 4), g, numpy=True), x)
+
+
+def test_v2v_pathloss_jumps_down_at_the_breakpoint_in_liangs_form():
+    """Liang's form puts the antenna heights h, not h − 1, in the beyond-breakpoint formula, so
+    the loss falls by 16.5 dB at d_bp = 6.67 m (docs/model.md §4.2): a platoon's V2V links,
+    L + r + h·v long, are that much weaker below about 6.7 m/s."""
+    d_bp = 4 * 0.5**2 * 2e9 / 3e8  # c = 3·10⁸ m/s, as in Liang et al.'s simulator
+    near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), RADIO)
+    assert float(near - far) == pytest.approx(16.50, abs=0.02)
