@@ -13,6 +13,8 @@ beyond its breakpoint (6.67 m at 2 GHz, 1.5 m antennas) than just below it, so b
 CAM delivery falls in the stop-and-go EPA city cycle.
 
     python benchmarks/delivery_vs_speed.py                  # writes results/delivery_vs_speed.json
+    python benchmarks/delivery_vs_speed.py --v2v-pathloss-form winner_b1 \
+        --output benchmarks/results/delivery_vs_speed_winner_b1.json   # the continuous form
     python benchmarks/delivery_vs_speed.py --speeds 0,25 --rra greedy --episodes 8 --output x.json
 """
 
@@ -32,7 +34,7 @@ from vdtn_marl.data.traces import ConstantSpeedTraceSource
 from vdtn_marl.results import is_finite
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim import channel
-from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.params import V2V_PATHLOSS_FORMS, TwinParams
 
 RESULTS = Path(__file__).parent / "results" / "delivery_vs_speed.json"
 
@@ -43,6 +45,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rra", default="random,greedy,round_robin", help="RRA baselines")
     p.add_argument("--episodes", type=int, default=32, help="scenarios per speed and policy")
     p.add_argument("--intervals", type=int, default=200, help="control intervals per scenario")
+    p.add_argument(
+        "--v2v-pathloss-form",
+        choices=V2V_PATHLOSS_FORMS,
+        default="liang",
+        help="V2V path loss beyond the breakpoint (docs/model.md §4.2)",
+    )
     p.add_argument("--seed", default="0", help="evaluation seed (one integer)")
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
     p.add_argument("--output", type=Path, default=RESULTS)
@@ -67,7 +75,9 @@ def link_geometry(params: TwinParams, speed_mps: float) -> tuple[float, float]:
 
 def measure(args: argparse.Namespace) -> list[dict]:
     """One row per (speed, RRA policy)."""
-    params = TwinParams.from_overrides(episode_intervals=args.intervals)
+    params = TwinParams.from_overrides(
+        episode_intervals=args.intervals, v2v_pathloss_form=args.v2v_pathloss_form
+    )
     cacc = make_control_baseline("cacc", params)
     rows = []
     for speed in args.speeds:
@@ -103,8 +113,8 @@ def measure(args: argparse.Namespace) -> list[dict]:
     return rows
 
 
-def print_table(rows: list[dict]) -> None:
-    table = Table(title="CAM delivery against leader speed (CACC on impaired observations)")
+def print_table(rows: list[dict], pathloss_form: str) -> None:
+    table = Table(title=f"CAM delivery against leader speed (CACC; V2V path loss: {pathloss_form})")
     headers = ("v m/s", "link m", "loss dB", "RRA", "delivered", "p50 ms", "V2I Mbps")
     for header in headers:
         table.add_column(header, justify="right", no_wrap=True)
@@ -126,7 +136,7 @@ def main(argv=None) -> int:
     if args.threads:
         torch.set_num_threads(args.threads)
     rows = measure(args)
-    print_table(rows)
+    print_table(rows, args.v2v_pathloss_form)
     atomic_write_json(
         args.output,
         {
@@ -135,6 +145,7 @@ def main(argv=None) -> int:
             "intervals": args.intervals,
             "seed": args.seed,
             "control": "cacc (impaired observation)",
+            "v2v_pathloss_form": args.v2v_pathloss_form,
             "rows": rows,
         },
     )

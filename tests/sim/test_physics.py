@@ -333,3 +333,16 @@ def test_v2v_pathloss_jumps_down_at_the_breakpoint_in_liangs_form():
     d_bp = 4 * 0.5**2 * 2e9 / 3e8  # c = 3·10⁸ m/s, as in Liang et al.'s simulator
     near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), RADIO)
     assert float(near - far) == pytest.approx(16.50, abs=0.02)
+
+
+def test_winner_b1_form_is_continuous_at_the_breakpoint():
+    radio = TwinParams.from_overrides(v2v_pathloss_form="winner_b1").radio
+    d_bp = 4 * 0.5**2 * 2e9 / 3e8
+    near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), radio)
+    assert float(far - near) == pytest.approx(0.0, abs=0.02)
+    # below the breakpoint both forms agree; beyond it WINNER+ B1 is 16.5 dB lossier
+    d = torch.tensor([5.0, 100.0])
+    gap = channel.v2v_pathloss_db(d, radio) - channel.v2v_pathloss_db(d, RADIO)
+    assert torch.allclose(gap, torch.tensor([0.0, 34.6 * math.log10(3.0)]), atol=1e-3)
+    with pytest.raises(ConfigError, match="v2v_pathloss_form='winner' must be one of 'liang'"):
+        TwinParams.from_overrides(v2v_pathloss_form="winner")

@@ -32,14 +32,17 @@ def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tenso
     PL = 22.7·log10(d) + 41 + 20·log10(f/5 GHz) for 3 m < d < d_bp, with d clamped to 3 m below;
     PL = 40·log10(d) + 9.45 − 17.3·log10(h_tx) − 17.3·log10(h_rx) + 2.7·log10(f/5 GHz) beyond
     the breakpoint d_bp = 4·(h_tx − 1)·(h_rx − 1)·f/c (both antennas at ``vehicle_height_m``).
+    With ``radio.v2v_pathloss_form == "winner_b1"`` the beyond-breakpoint heights are the
+    effective ones, h − 1, as in WINNER+ B1 itself, and the loss is continuous at d_bp.
     """
     f_ghz = radio.carrier_ghz
     h = radio.vehicle_height_m
     breakpoint_m = 4.0 * (h - 1.0) ** 2 * f_ghz * 1e9 / SPEED_OF_LIGHT_MPS
+    far_height_m = h if radio.v2v_pathloss_form == "liang" else h - 1.0
     d = clamp(distance_m, 3.0)
     log_d = log10(d)
     near = 22.7 * log_d + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
-    far = 40.0 * log_d + 9.45 - 2 * 17.3 * math.log10(h) + 2.7 * math.log10(f_ghz / 5.0)
+    far = 40.0 * log_d + 9.45 - 2 * 17.3 * math.log10(far_height_m) + 2.7 * math.log10(f_ghz / 5.0)
     return xp(d).where(d < breakpoint_m, near, far)
 
 

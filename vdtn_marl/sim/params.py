@@ -109,6 +109,10 @@ class PlatoonParams:
         _check_range("initial_speed_noise_mps", self.initial_speed_noise_mps, 0.0, 10.0)
 
 
+V2V_PATHLOSS_FORMS = ("liang", "winner_b1")
+"""Values of :attr:`RadioParams.v2v_pathloss_form`."""
+
+
 @dataclass(frozen=True)
 class RadioParams:
     """C-V2X sidelink / uplink radio model (docs/model.md §4)."""
@@ -132,6 +136,10 @@ class RadioParams:
     v2i_decorrelation_m: float = 50.0
     v2v_shadow_std_db: float = 3.0
     v2v_decorrelation_m: float = 10.0
+    # V2V path loss beyond the breakpoint (docs/model.md §4.2): "liang" (Liang et al.'s
+    # simulator, antenna heights h: 16.5 dB lower just beyond the breakpoint than just below)
+    # or "winner_b1" (WINNER+ B1's effective heights h − 1: continuous at the breakpoint)
+    v2v_pathloss_form: str = "liang"
 
     @property
     def num_power_levels(self) -> int:
@@ -171,6 +179,11 @@ class RadioParams:
             _check_range(name, getattr(self, name), 0.0, 30.0)
         for name in ("v2i_decorrelation_m", "v2v_decorrelation_m"):
             _check_range(name, getattr(self, name), 0.0, 1e5, low_open=True)
+        if self.v2v_pathloss_form not in V2V_PATHLOSS_FORMS:
+            raise ConfigError(
+                f"v2v_pathloss_form={self.v2v_pathloss_form!r} must be one of "
+                f"{', '.join(repr(form) for form in V2V_PATHLOSS_FORMS)}"
+            )
 
 
 @dataclass(frozen=True)
