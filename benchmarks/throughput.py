@@ -60,6 +60,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
     p.add_argument("--repeats", type=int, default=3, help="runs per measurement (median used)")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--traces",
+        default="synthetic",
+        help="leader trace set (default synthetic, with which the committed figures were "
+        "measured; episode resets cost more or less with another set)",
+    )
     args = p.parse_args(argv)
     if args.seconds <= 0:
         p.error("--seconds must be > 0")
@@ -86,10 +92,10 @@ def _sync(device: torch.device) -> None:
 
 
 # ---------------------------------------------------------------------- (a) PettingZoo env
-def bench_env(kappa1: float, seconds: float, seed: int) -> dict:
+def bench_env(kappa1: float, seconds: float, seed: int, traces: str) -> dict:
     from vdtn_marl.envs import TwoTimescaleEnv
 
-    env = TwoTimescaleEnv(kappa1=kappa1, seed=seed)
+    env = TwoTimescaleEnv(kappa1=kappa1, seed=seed, traces=traces)
     rng = np.random.default_rng(seed)
     n_act = env.twin.params.radio.num_actions
     pp = env.twin.params.platoon
@@ -140,11 +146,15 @@ def bench_env(kappa1: float, seconds: float, seed: int) -> dict:
 
 
 # ---------------------------------------------------------------------- (b) batched core
-def bench_core(batch: int, device: str, backend: str, seconds: float, seed: int) -> dict:
+def bench_core(
+    batch: int, device: str, backend: str, seconds: float, seed: int, traces: str
+) -> dict:
     from vdtn_marl.sim.cacc import CACCController
     from vdtn_marl.sim.twin import DigitalTwin
 
-    twin = DigitalTwin(batch_size=batch, device=device, seed=seed, backend=backend)
+    twin = DigitalTwin(
+        batch_size=batch, device=device, seed=seed, backend=backend, trace_source=traces
+    )
     dev = twin.device
     controller = CACCController(twin.params.platoon)
     t_int = twin.subframes_per_interval
@@ -295,16 +305,21 @@ def main(argv=None) -> int:
     torch.set_num_threads(args.threads)
     seconds, seed = args.seconds, args.seed
     jobs = [
-        (f"TwoTimescaleEnv kappa1={k:g}", lambda k=k: bench_env(k, seconds, seed))
+        (f"TwoTimescaleEnv kappa1={k:g}", lambda k=k: bench_env(k, seconds, seed, args.traces))
         for k in (0.5, 1.0)
     ]
-    jobs.append(("DigitalTwin B=1 numpy/cpu", lambda: bench_core(1, "cpu", "numpy", seconds, seed)))
+    jobs.append(
+        (
+            "DigitalTwin B=1 numpy/cpu",
+            lambda: bench_core(1, "cpu", "numpy", seconds, seed, args.traces),
+        )
+    )
     for device in args.device:
         for batch in args.batch_sizes:
             jobs.append(
                 (
                     f"DigitalTwin B={batch} torch/{device}",
-                    lambda b=batch, d=device: bench_core(b, d, "torch", seconds, seed),
+                    lambda b=batch, d=device: bench_core(b, d, "torch", seconds, seed, args.traces),
                 )
             )
     load_before = os.getloadavg()
@@ -337,6 +352,7 @@ def main(argv=None) -> int:
         "devices": args.device,
         "device_names": {"cpu": platform.processor() or platform.machine(), "cuda": cuda_names},
         "seconds_per_measurement": args.seconds,
+        "traces": args.traces,
         "targets": targets,
         "results": results,
     }

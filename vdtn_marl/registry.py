@@ -235,7 +235,7 @@ def _reset_plugins_for_tests() -> None:
 # --- built-in environments -----------------------------------------------------------------
 # Lazy string entry points: nothing below imports the simulator or torch.
 TRACES_NOTE = (
-    "leader speed trace set, by name (kwarg `traces`, default synthetic; provenance of each "
+    "leader speed trace set, by name (kwarg `traces`, default udds; provenance of each "
     "in EnvSpec.data_sources) or a TraceSource (kwarg `trace_source`)"
 )
 

@@ -16,9 +16,10 @@ def _as_numpy(x):
 
 @pytest.mark.parametrize("batch", [1, 3])
 def test_numpy_and_torch_twins_agree(batch):
-    """B = 1 (what the PettingZoo envs run): vehicle observations, rewards, CAM delays, V2I
-    rates and IVoI bit-identical, RRA observations within a few ulp; at B > 1 (with a partial
-    reset) within float32 round-off."""
+    """B = 1 (what the PettingZoo envs run): vehicle observations, rewards, CAM delays and
+    IVoI bit-identical, RRA observations and V2I rates within a few ulp (NumPy's log1p may
+    differ from torch's in the last bit); at B > 1 (with a partial reset) within float32
+    round-off."""
     params = TwinParams.from_overrides(episode_intervals=20)
     twins = {
         backend: DigitalTwin(params, batch_size=batch, seed=4, backend=backend)
@@ -59,9 +60,9 @@ def test_numpy_and_torch_twins_agree(batch):
             )
         for i, (got, want) in enumerate(zip(records["numpy"], records["torch"], strict=True)):
             message = f"interval {k}, output {i}"
-            if batch == 1 and i > 0:
+            if batch == 1 and i not in (0, 4):
                 np.testing.assert_array_equal(got, want, err_msg=message)
-            elif batch == 1:  # the CAM-bits-left feature may differ in the last bits
+            elif batch == 1:  # CAM bits left and V2I rates pass through log1p: last bits
                 np.testing.assert_allclose(got, want, rtol=1e-6, atol=0, err_msg=message)
             else:
                 np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6, err_msg=message)

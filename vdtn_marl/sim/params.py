@@ -193,7 +193,7 @@ class TwinParams:
     platoon: PlatoonParams = field(default_factory=PlatoonParams)
     radio: RadioParams = field(default_factory=RadioParams)
     episode_intervals: int = 400  # 20 s at Δt = 50 ms
-    traces: str = "synthetic"  # name of the leader trace set (vdtn_marl.data)
+    traces: str = "udds"  # leader trace set by name (vdtn_marl.data): the EPA city cycle
 
     def validate(self) -> TwinParams:
         self.platoon.validate()
