@@ -193,6 +193,7 @@ def test_eval_of_a_control_checkpoint_scores_pi_star(eval_run):
     assert summary["checkpoint_task"] == "control" and summary["warnings"] == []
     assert "cacc_control_cost" in summary  # π* against CACC, as `train task=control` evaluates
     assert "cam_delivery_rate" not in summary  # not the (untrained) π̃ under an RRA policy
+    assert "kappa1" not in summary and "kappa2" not in summary  # no RRA reward was used
 
 
 def test_eval_warns_about_an_untrained_rra_policy(eval_run, tmp_path, capsys):

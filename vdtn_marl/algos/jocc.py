@@ -555,8 +555,12 @@ class JointOptimisation:
             "vdtn_marl_version": __version__,
             "task": self.task,
             "seed": self.cfg.seed,
-            "kappa1": self.cfg.rra.kappa1,
-            "kappa2": self.cfg.rra.kappa2_value,
+            # the RRA reward weights, where this task trains RRA agents
+            **(
+                {"kappa1": self.cfg.rra.kappa1, "kappa2": self.cfg.rra.kappa2_value}
+                if "rra" in self.stages
+                else {}
+            ),
             "rra": self.cfg.rra.name,
             "control": self.cfg.control.name,
             "scenario": self.cfg.scenario.name,
