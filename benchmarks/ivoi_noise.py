@@ -35,7 +35,7 @@ from rich.table import Table
 
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.benchmarking import parse_numbers, parse_seeds, provenance
-from vdtn_marl.config import ExperimentConfig, RRAConfig, RunConfig, validate
+from vdtn_marl.config import ExperimentConfig, RRAConfig, RunConfig, ScenarioConfig, validate
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
@@ -62,13 +62,14 @@ class SyntheticIVoI:
         return self.effect * delivered + self.noise * noise
 
 
-def reduced_config(seed: int, kappa1: float = 0.0) -> RunConfig:
+def reduced_config(seed: int, kappa1: float = 0.0, traces: str = "synthetic") -> RunConfig:
     """JOCC with ``kappa1`` (κ2 = 1 − κ1) at the ``reduced`` leaderboard budgets (platoon4
-    defaults)."""
+    defaults, leader traces ``traces``)."""
     experiment = replace(
         ExperimentConfig(), control_iterations=8, rra_iterations=16, checkpoint_every=0
     )
     return RunConfig(
+        scenario=ScenarioConfig(traces=traces),
         rra=RRAConfig(name="jocc", kappa1=kappa1),
         experiment=experiment,
         seed=seed,
@@ -98,6 +99,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--kappa1", type=float, default=0.0, help="weight of V2I throughput, in [0, 1)"
     )
+    parser.add_argument(
+        "--traces",
+        default="synthetic",
+        help="leader trace set (default synthetic, with which the committed figures were "
+        "measured; runs default to udds)",
+    )
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     seeds = parse_seeds("--seeds", args.seeds)
@@ -112,7 +119,7 @@ def main(argv: list[str] | None = None) -> int:
         for seed in seeds:
             start = time.perf_counter()
             summary = train_with_synthetic_ivoi(
-                reduced_config(seed, args.kappa1), args.effect, noise
+                reduced_config(seed, args.kappa1, args.traces), args.effect, noise
             )
             rows.append(
                 {
@@ -146,6 +153,7 @@ def main(argv: list[str] | None = None) -> int:
             **provenance("ivoi_noise"),
             "effect": args.effect,
             "kappa1": args.kappa1,
+            "traces": args.traces,
             "budget": "reduced: 8 PPO iterations for π* and π̃, 16 for the RRA agents",
             "seconds": time.perf_counter() - began,
             "rows": rows,

@@ -85,11 +85,19 @@ def mappo_frames_per_second(args: argparse.Namespace) -> dict[str, dict]:
     import vdtn_marl
 
     algo = AlgoConfig(num_envs=args.batch, rollout_steps=50, minibatch_size=4096, epochs=4)
-    env = VDTNTorchRLEnv("control", batch_size=args.batch, device=args.device, seed=args.seed)
+    env = VDTNTorchRLEnv(
+        "control", batch_size=args.batch, device=args.device, seed=args.seed, traces=args.traces
+    )
     trainer = PPOTrainer(env, "vehicle", algo, seed=args.seed, prior=CACCController())
-    batched = {"B": args.batch, **frames_per_second(trainer, args.fps_iterations)}
+    batched = {
+        "B": args.batch,
+        "traces": args.traces,
+        **frames_per_second(trainer, args.fps_iterations),
+    }
     wrapped = PettingZooWrapper(
-        vdtn_marl.make("vdtn/platoon-control-v0"), return_state=False, use_mask=False
+        vdtn_marl.make("vdtn/platoon-control-v0", traces=args.traces),
+        return_state=False,
+        use_mask=False,
     )
     wrapped_trainer = PPOTrainer(
         wrapped, "vehicle", replace(algo, minibatch_size=256, rollout_steps=200), seed=args.seed

@@ -246,6 +246,7 @@ def test_bad_rra_actions_and_agent_names_raise():
         ({"reward": "vibes"}, "reward='vibes'"),
         ({"num_vehicles": 0}, "num_vehicles=0"),
         ({"render_mode": "human"}, "render_mode='human'"),
+        ({"traces": "synthetic", "trace_source": "udds"}, "both choose the leader traces"),
     ],
 )
 def test_bad_config_raises_naming_value(kwargs, fragment):

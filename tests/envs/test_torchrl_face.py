@@ -365,6 +365,8 @@ def test_bad_configuration_raises():
         VDTNTorchRLEnv(batch_size=0)
     with pytest.raises(ValueError, match="kappa1"):
         VDTNTorchRLEnv(mode="joint", kappa1=1.5)
+    with pytest.raises(ConfigError, match="both choose the leader traces"):
+        VDTNTorchRLEnv(traces="hwfet", trace_source="udds")
 
 
 def test_seed_reproducible_and_model_kwargs():

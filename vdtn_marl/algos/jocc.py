@@ -564,6 +564,7 @@ class JointOptimisation:
             "rra": self.cfg.rra.name,
             "control": self.cfg.control.name,
             "scenario": self.cfg.scenario.name,
+            "traces": self.cfg.scenario.traces,
             "iterations": self.position["iteration"],
             "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
             # with algo.validate_every: the trainer iteration whose weights each stage kept

@@ -77,6 +77,16 @@ def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
     return float(kappa1), float(kappa2)
 
 
+def check_one_trace_choice(trace_source, model_kwargs: dict) -> None:
+    """Raise :class:`ConfigError` when both ``traces=`` (a trace set by name, a model
+    parameter) and ``trace_source=`` choose the leader traces of an environment."""
+    if trace_source is not None and "traces" in model_kwargs:
+        raise ConfigError(
+            f"traces={model_kwargs['traces']!r} and trace_source={trace_source!r} both choose "
+            "the leader traces; pass only one of them"
+        )
+
+
 class VDTNParallelEnv(ParallelEnv):
     """Common plumbing of the four environments (one scenario, B = 1).
 
@@ -100,6 +110,7 @@ class VDTNParallelEnv(ParallelEnv):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ConfigError(f"render_mode={render_mode!r} must be None or one of {RENDER_MODES}")
         self.render_mode = render_mode
+        check_one_trace_choice(trace_source, model_kwargs)
         params = TwinParams.from_overrides(**model_kwargs)
         backend = "numpy" if resolve_device(device).type == "cpu" else "torch"
         self.twin = DigitalTwin(

@@ -37,7 +37,11 @@ from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
 from vdtn_marl.data.traces import TraceSource
-from vdtn_marl.envs.base import rra_observation_space, vehicle_observation_space
+from vdtn_marl.envs.base import (
+    check_one_trace_choice,
+    rra_observation_space,
+    vehicle_observation_space,
+)
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
@@ -123,6 +127,7 @@ class VDTNTorchRLEnv(EnvBase):
         self.has_vehicles = mode != "rra"
         self.has_rra = mode in ("rra", "joint")
         self.impaired = mode != "control"  # CAMs cross the radio in every mode but "control"
+        check_one_trace_choice(trace_source, model_kwargs)
         params = TwinParams.from_overrides(**model_kwargs)
         self.twin = DigitalTwin(
             params,
