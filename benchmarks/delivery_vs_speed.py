@@ -35,6 +35,7 @@ from vdtn_marl.results import is_finite
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim import channel
 from vdtn_marl.sim.params import V2V_PATHLOSS_FORMS, TwinParams
+from vdtn_marl.sim.platoon import desired_gaps_m
 
 RESULTS = Path(__file__).parent / "results" / "delivery_vs_speed.json"
 
@@ -68,7 +69,8 @@ def parse_args(argv=None) -> argparse.Namespace:
 def link_geometry(params: TwinParams, speed_mps: float) -> tuple[float, float]:
     """(V2V link distance in m, its path loss in dB) at the desired gap for ``speed_mps``."""
     pp = params.platoon
-    distance_m = pp.vehicle_length_m + pp.standstill_gap_m + pp.time_headway_s * speed_mps
+    gap_m = desired_gaps_m(torch.tensor([[speed_mps, speed_mps]]), pp)  # one follower
+    distance_m = pp.vehicle_length_m + float(gap_m[0, 0])
     loss_db = channel.v2v_pathloss_db(torch.tensor([distance_m]), params.radio)
     return distance_m, float(loss_db[0])
 

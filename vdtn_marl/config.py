@@ -39,7 +39,7 @@ class ScenarioConfig:
     subchannel_bandwidth_hz: float = 180e3
     cam_size_bits: int = 14_400
     episode_intervals: int = 200  # 10 s at Δt = 50 ms
-    traces: str = "udds"  # name of a registered leader trace set (default: the EPA city cycle)
+    traces: str = TwinParams.traces  # a registered leader trace set (the EPA city cycle)
     trace_path: str | None = None  # a user's trace file (NGSIM, highD, time/speed CSV)
     model: dict[str, Any] = field(default_factory=dict)
 

@@ -222,6 +222,7 @@ def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):
     assert summary["evoi_ci_low"] <= summary["evoi"] <= summary["evoi_ci_high"]
     assert summary["trainer_iterations"] == {"pi_star": 1, "pi_tilde": 1, "rra": 2}
     assert (summary["kappa1"], summary["kappa2"]) == (cfg.rra.kappa1, cfg.rra.kappa2_value)
+    assert summary["traces"] == cfg.scenario.traces == "udds"
     payload = load_checkpoint(tmp_path / "checkpoints" / "last.pt", to_dict(cfg))
     assert payload["position"]["iteration"] == 1
 

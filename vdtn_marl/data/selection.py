@@ -53,6 +53,12 @@ def check_trace_settings(traces: str, trace_path: str | None) -> None:
     file_sources(traces, trace_path)
 
 
+def split_in_time(name: str) -> bool:
+    """Whether runs split the named trace set ``name`` in time (:func:`named_sources`): true
+    for a recorded set, false for a generated one."""
+    return isinstance(get_trace_source(name), ProfileTraceSource)
+
+
 def named_sources(name: str) -> tuple[str | TraceSource, str | TraceSource]:
     """Training and evaluation sources of the named trace set ``name``: the name itself for
     both when its traces are generated, the two time parts of a recorded set

@@ -15,6 +15,7 @@ from typing import Any
 from vdtn_marl import __version__
 from vdtn_marl.config import BenchConfig
 from vdtn_marl.data.profiles import TIME_SPLIT_TRAIN_FRACTION
+from vdtn_marl.data.selection import split_in_time
 from vdtn_marl.data.traces import trace_set_provenance
 from vdtn_marl.leaderboard.grid import (
     METRICS,
@@ -116,7 +117,7 @@ def _traces_line(composed: Mapping) -> str:
     for (traces, trace_path), scenarios in settings.items():
         if trace_path:
             what = f"`{traces}` file `{Path(trace_path).name}`, divided into train and eval parts"
-        elif traces in provenance and not provenance[traces]["synthetic"]:
+        elif split_in_time(traces):
             what = (
                 f"`{traces}` ({provenance[traces]['description']}; recorded: training draws "
                 f"from the first {train:.0%} of each drive, evaluation from the last "
