@@ -19,6 +19,7 @@ from vdtn_marl.voi import IVOI_BASELINES
 
 ALGOS = ("mappo", "ippo")
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
+RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations
 RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
 LEARNED_RRA = ("jocc", "drra", "throughput")
@@ -72,9 +73,19 @@ class AlgoConfig:
     lr: float = 3e-4
     lr_schedule: str = "constant"  # linear: decays to 0 over each training stage
     gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)
-    rra_gamma: float = 0.99  # RRA agents: discount per subframe (horizon ≈ 100 ms)
     lmbda: float = 0.95  # GAE λ of the vehicles (per control interval)
-    rra_lmbda: float = 0.95  # GAE λ of the RRA agents (per subframe)
+    # RRA credit (docs/model.md §5): "interval" (the paper's objective, discounted per control
+    # interval): rra_gamma and rra_lmbda are per interval and apply as γ^(1/T), λ^(1/T) per
+    # subframe; "subframe": they apply per 1 ms subframe as given (horizon ≈ 100 ms at 0.99)
+    rra_credit: str = "interval"
+    rra_gamma: float = 0.99  # RRA agents: discount (per interval with rra_credit=interval)
+    rra_lmbda: float = 0.95  # GAE λ of the RRA agents (per interval with rra_credit=interval)
+    # subframes whose link is silent (its CAM already delivered: the action has no effect)
+    # do not train the RRA policy (their advantage is masked out)
+    rra_mask_silent: bool = True
+    # environments persist across PPO iterations (reset only where an episode ends), so
+    # batches sample the whole episode; false: every iteration collects from fresh resets
+    persistent_envs: bool = True
     clip_epsilon: float = 0.2
     entropy_coef: float = 1e-3
     initial_log_scale: float = -3.0  # log std (pre-tanh) of the initial acceleration policy
@@ -97,6 +108,13 @@ class AlgoConfig:
     @property
     def centralised_critic(self) -> bool:
         return self.name == "mappo"
+
+    def rra_subframe_discounts(self, subframes_per_interval: int) -> tuple[float, float]:
+        """(γ, λ) per RRA step (one subframe) for ``rra_credit`` (docs/model.md §5)."""
+        if self.rra_credit == "subframe":
+            return self.rra_gamma, self.rra_lmbda
+        power = 1.0 / subframes_per_interval
+        return self.rra_gamma**power, self.rra_lmbda**power
 
 
 @dataclass
@@ -269,6 +287,10 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("algo.initial_log_scale", a.initial_log_scale, -10.0, 2.0)
     _real("algo.lmbda", a.lmbda, 0.0, 1.0)
     _real("algo.rra_lmbda", a.rra_lmbda, 0.0, 1.0)
+    _choice("algo.rra_credit", a.rra_credit, RRA_CREDITS)
+    for key in ("rra_mask_silent", "persistent_envs"):
+        if not isinstance(getattr(a, key), bool):
+            raise ConfigError(f"algo.{key}={getattr(a, key)!r} must be true or false")
     _real("algo.clip_epsilon", a.clip_epsilon, 0.0, 1.0, low_open=True)
     _real("algo.entropy_coef", a.entropy_coef, 0.0, 1e3)
     _real("algo.critic_coef", a.critic_coef, 0.0, 1e3)
@@ -334,6 +356,10 @@ def validate_device(device: str) -> str:
 
 # --- benchmarks (`vdtn-marl bench`) ---------------------------------------------------------
 
+#: ``benchmark.interval``: how the leaderboard's confidence intervals across seeds are computed
+#: (Student-t, BCa bootstrap, percentile bootstrap; vdtn_marl.leaderboard.stats).
+BENCHMARK_INTERVALS = ("t", "bca", "percentile")
+
 
 @dataclass
 class BenchmarkConfig:
@@ -348,6 +374,11 @@ class BenchmarkConfig:
 
     ``version`` names the benchmark's definition in published results (it is written into
     every result file); bump it whenever scenarios, methods, seeds or budgets change.
+
+    ``interval`` chooses the confidence interval of means and paired differences across seeds:
+    ``t`` (Student-t, the default), ``bca`` or ``percentile`` (bootstrap with
+    ``bootstrap_resamples`` resamples). The IQM's interval is always a bootstrap: BCa under
+    ``t`` and ``bca``, percentile under ``percentile``.
     """
 
     name: str = "smoke"
@@ -361,7 +392,8 @@ class BenchmarkConfig:
     seeds: list[int] = field(default_factory=lambda: [0])
     # the two methods whose gap/speed error traces are compared (same scenario and seed)
     trace_methods: list[str] = field(default_factory=list)
-    bootstrap_resamples: int = 10_000  # percentile bootstrap of the 95% CIs across seeds
+    interval: str = "t"  # one of BENCHMARK_INTERVALS
+    bootstrap_resamples: int = 10_000  # resamples of the bootstrap CIs (bca/percentile, IQM)
     confidence: float = 0.95
 
 
@@ -441,6 +473,7 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
                 f"benchmark.trace_methods={list(b.trace_methods)} names {method!r}, which is not "
                 f"a method; allowed: {', '.join(b.methods)}"
             )
+    _choice("benchmark.interval", b.interval, BENCHMARK_INTERVALS)
     _positive_int("benchmark.bootstrap_resamples", b.bootstrap_resamples, low=100, high=10**7)
     _real("benchmark.confidence", b.confidence, 0.5, 1.0, low_open=True)
     if b.confidence >= 1.0:

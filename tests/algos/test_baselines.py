@@ -68,7 +68,48 @@ def test_feature_layout_matches_twin_observation():
     torch.testing.assert_close(obs[..., layout.v2i_interference], v2i, atol=1e-4, rtol=1e-4)
     assert bool((obs[..., layout.bits_left] == 1.0).all())  # nothing sent yet
     assert bool((obs[..., layout.time_left] == 1.0).all())  # subframe 0
-    assert layout.control.stop == layout.dim
+    assert layout.ivoi.stop == layout.dim  # the blocks tile the observation
+    low, high = layout.bounds()
+    assert bool(((obs >= torch.from_numpy(low)) & (obs <= torch.from_numpy(high))).all())
+
+
+@pytest.mark.parametrize("backend", ["torch", "numpy"])
+def test_rra_ivoi_features_track_each_recipients_cams_and_commands(backend):
+    """cam_age, cam_delay_history and command_history of link i describe follower i only:
+    hand-set deliveries (link 1 on time at subframe 5, link 2 lost, link 3 at subframe T) and
+    distinct commands per follower must come back in the next interval's observation, link by
+    link, on both backends."""
+    params = TwinParams()
+    twin = DigitalTwin(params, batch_size=2, seed=3, radio=True, backend=backend)
+    lay, t = twin.rra_layout, twin.subframes_per_interval
+    first = twin.rra_observation()
+    assert float(abs(torch.as_tensor(first[..., lay.ivoi][..., 1:])).max()) == 0.0  # reset
+    u_max = params.platoon.accel_max_mps2
+    for commands in ([0.5, -1.0, 1.5], [1.0, 0.2, -0.4]):
+        for _ in range(t):
+            twin.step_subframe(
+                torch.full((2, 3), params.radio.num_actions - 1).numpy()
+                if backend == "numpy"
+                else torch.full((2, 3), params.radio.num_actions - 1)
+            )  # every link off: nothing is delivered by the radio itself
+        delays = torch.tensor([[5, t + 1, t]] * 2)
+        twin.link_state.delay_subframes = delays.numpy() if backend == "numpy" else delays
+        twin.finish_interval(torch.tensor([commands] * 2), perfect=False)
+        twin.begin_interval()
+    obs = torch.as_tensor(twin.rra_observation())
+    history = obs[0, :, lay["cam_delay_history"]]
+    expected = torch.tensor([5, t + 1, t], dtype=torch.float32) / (t + 1)
+    torch.testing.assert_close(history[:, 0], expected)  # newest first
+    torch.testing.assert_close(history[:, 1], expected)
+    assert float(history[:, 2].abs().max()) == 0.0  # no third CAM yet
+    # links 1 and 3 delivered in the last interval (content age 1); link 2 holds the CAM of
+    # the interval before the last two, i.e. the one from before the episode: age 3 intervals
+    torch.testing.assert_close(obs[0, :, lay["cam_age"]].squeeze(-1), torch.tensor([1.0, 3, 1]))
+    commands = obs[0, :, lay["command_history"]] * u_max  # u_{k−2}, u_{k−3}
+    torch.testing.assert_close(commands[:, 0], torch.tensor([0.5, -1.0, 1.5]), atol=1e-5, rtol=0)
+    assert float(commands[:, 1].abs().max()) == 0.0
+    in_force = obs[0, :, lay["command"]].squeeze(-1) * u_max  # u_{k−1}
+    torch.testing.assert_close(in_force, torch.tensor([1.0, 0.2, -0.4]), atol=1e-5, rtol=0)
 
 
 # ---------------------------------------------------------------------- round robin

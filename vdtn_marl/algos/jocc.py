@@ -191,14 +191,18 @@ class JointOptimisation:
             policy = rra_env.control_module.policy
             if hasattr(policy, "bind"):  # oracle, causal_mpc: they read the twin's true state
                 rra_env.control_module.policy = policy.bind(rra_env.twin)
+            gamma, lmbda = algo.rra_subframe_discounts(self.params.platoon.subframes_per_interval)
+            bits_left = rra_env.twin.rra_layout.bits_left
             self.rra = PPOTrainer(
                 rra_env,
                 "rra",
                 algo,
                 seed=cfg.seed * 8 + 2,
                 rollout_steps=algo.rra_rollout_steps,
-                gamma=algo.rra_gamma,
-                lmbda=algo.rra_lmbda,
+                gamma=gamma,
+                lmbda=lmbda,
+                # a link whose CAM is delivered is silent: its action has no effect
+                active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
             )
         self.position = {"iteration": 0, "stage": 0, "stage_start": None}
         self.train_log = MetricsLog(self.run_dir, tensorboard=True)

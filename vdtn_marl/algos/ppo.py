@@ -15,14 +15,27 @@ evaluation ones), and hands back the best-scoring actor and critic at the end of
 (model selection; the last iterate of PPO can be much worse than an earlier one, and a
 warm-started policy is kept unless PPO beats it).
 
-Reproducibility: iteration ``k`` collects from freshly reset scenarios seeded with
-``seed_for(k)``; action sampling and minibatch shuffles use the global torch RNG, whose state
-goes into :meth:`PPOTrainer.state_dict`. A run resumed from a checkpoint therefore continues
-bit for bit on the same device.
+Training window (``algo.persistent_envs``, default): the environment's scenarios persist
+across PPO iterations and are reset only where an episode ends, so batches sample every part
+of the episode (not only the intervals after a reset, where the platoon is at its desired
+gaps); the first iteration starts from scenarios reset with ``seed_for(k)``. With
+``persistent_envs=false`` every iteration ``k`` collects from freshly reset scenarios seeded
+with ``seed_for(k)``.
+
+Credit (``active``): a callable that marks, from the observations, the agent-steps whose action
+has an effect (an RRA link with a CAM to send). The others' advantages are set to zero after
+GAE, and advantages are standardised over the active agent-steps only, per agent, so steps
+whose action changes nothing do not train the policy (the critic still learns their values).
+
+Reproducibility: action sampling and minibatch shuffles use the global torch RNG, whose state
+goes into :meth:`PPOTrainer.state_dict`, and so do the persisting scenarios (the environment's
+state and the step to continue from, :meth:`VDTNTorchRLEnv.state_dict`). A run resumed from a
+checkpoint therefore continues bit for bit on the same device.
 """
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
 from collections.abc import Sequence
@@ -95,8 +108,12 @@ class PPOTrainer:
         rollout_steps: int | None = None,
         gamma: float | None = None,
         lmbda: float | None = None,
+        active=None,
     ):
         self.env = env
+        self.active = active
+        self.persistent = bool(algo.persistent_envs)
+        self._carry: TensorDictBase | None = None  # where persisting scenarios continue
         self.group = group
         self.algo = algo
         self.seed = int(seed)
@@ -130,7 +147,8 @@ class PPOTrainer:
             clip_epsilon=algo.clip_epsilon,
             entropy_coeff=algo.entropy_coef,
             critic_coeff=algo.critic_coef,
-            normalize_advantage=True,
+            # with `active`, update() standardises over the active agent-steps itself
+            normalize_advantage=active is None,
             normalize_advantage_exclude_dims=(-2,),  # the agent dimension
         )
         self.loss.set_keys(
@@ -154,18 +172,45 @@ class PPOTrainer:
         return self.seed * SEED_STRIDE + iteration
 
     def collect(self, iteration: int | None = None) -> TensorDictBase:
-        """Roll out ``rollout_steps`` steps of every scenario with the stochastic actor."""
+        """Roll out ``rollout_steps`` steps of every scenario with the stochastic actor.
+
+        The training batch (``iteration`` None) continues the persisting scenarios
+        (``algo.persistent_envs``); an explicit ``iteration`` always collects from scenarios
+        freshly reset with ``seed_for(iteration)`` (scaling fits, tests)."""
         k = self.iteration if iteration is None else iteration
-        self.env.set_seed(self.seed_for(k))
         with torch.no_grad(), set_interaction_type(InteractionType.RANDOM):
-            start = self.env.reset()
-            return self.env.rollout(
-                self.rollout_steps,
-                policy=self.actor,
-                tensordict=start,
-                auto_reset=False,
-                break_when_any_done=False,
-            )
+            if not (self.persistent and iteration is None):
+                self.env.set_seed(self.seed_for(k))
+                return self.env.rollout(
+                    self.rollout_steps,
+                    policy=self.actor,
+                    tensordict=self.env.reset(),
+                    auto_reset=False,
+                    break_when_any_done=False,
+                )
+            if self._carry is None:
+                self.env.set_seed(self.seed_for(k))
+                self._carry = self.env.reset()
+            steps, state = [], self._carry
+            for _ in range(self.rollout_steps):  # what EnvBase.rollout does, keeping the end
+                state = self.actor(state)
+                step, state = self.env.step_and_maybe_reset(state)
+                steps.append(step)
+            self._carry = state
+            return torch.stack(steps, dim=len(self.env.batch_size)).contiguous()
+
+    @contextlib.contextmanager
+    def _env_kept(self):
+        """Inside the block the environment may be reset and stepped (validation); the
+        persisting scenarios continue afterwards as if it had not been used."""
+        if not (self.persistent and self._carry is not None):
+            yield
+            return
+        saved = self.env.state_dict()
+        try:
+            yield
+        finally:
+            self.env.load_state_dict(saved)
 
     def fit_observation_scaling(self) -> None:
         """Standardise observations with statistics of one rollout of the initial policy
@@ -194,6 +239,8 @@ class PPOTrainer:
                 params=self.loss.critic_network_params,
                 target_params=self.loss.target_critic_network_params,
             )
+            if self.active is not None:
+                self._mask_advantage(data)
         flat = data.reshape(-1)
         n = flat.shape[0]
         size = min(self.algo.minibatch_size, n)
@@ -214,12 +261,31 @@ class PPOTrainer:
                 steps += 1
         return {key: value / max(steps, 1) for key, value in sums.items()}
 
+    def _mask_advantage(self, data: TensorDictBase) -> None:
+        """Standardise the advantage [..., n, 1] over the active agent-steps of each agent and
+        zero it elsewhere (see the module doc)."""
+        key = self.loss.tensor_keys.advantage
+        advantage = data.get(key)
+        active = self.active(data.get((self.group, "observation")))[..., None].to(advantage)
+        dims = tuple(d for d in range(advantage.dim()) if d != advantage.dim() - 2)
+        count = active.sum(dims, keepdim=True)
+        mean = (advantage * active).sum(dims, keepdim=True) / count.clamp_min(1.0)
+        var = ((advantage - mean) ** 2 * active).sum(dims, keepdim=True) / (count - 1).clamp_min(
+            1.0
+        )
+        standard = (advantage - mean) / var.sqrt().clamp_min(1e-6)
+        data.set(key, torch.where(active > 0, standard, torch.zeros_like(advantage)))
+
     def validation_return(self) -> float:
         """Mean reward (per agent and step) of the deterministic policy on the validation
         scenarios: ``rollout_steps`` steps of at least ``algo.validation_scenarios``
         scenarios (whole batches of the environment's B), drawn after seeding the environment
         with ``seed_for(VALIDATION_ITERATION)``, the same at every call."""
         batches = -(-self.algo.validation_scenarios // self.env.batch_size.numel())
+        with self._env_kept():
+            return self._validation_return(batches)
+
+    def _validation_return(self, batches: int) -> float:
         self.env.set_seed(self.seed_for(VALIDATION_ITERATION))
         total = 0.0
         with torch.no_grad(), set_interaction_type(InteractionType.DETERMINISTIC):
@@ -330,6 +396,11 @@ class PPOTrainer:
             "iteration": self.iteration,
             "scaling_fitted": self.scaling_fitted,
             "stage": copy.deepcopy(self.stage),
+            **(
+                {"env": self.env.state_dict(), "carry": self._carry.to_dict()}
+                if self._carry is not None
+                else {}
+            ),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -339,6 +410,12 @@ class PPOTrainer:
         self.iteration = int(state["iteration"])
         self.scaling_fitted = bool(state["scaling_fitted"])
         self.stage = copy.deepcopy(state.get("stage"))
+        self._carry = None
+        if "carry" in state:
+            carry = self.env.reset()  # a tensordict of the right structure (nested batch sizes)
+            self.env.load_state_dict(state["env"])
+            carry.update(state["carry"])
+            self._carry = carry
 
 
 class ActorPolicy:

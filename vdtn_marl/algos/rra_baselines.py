@@ -11,65 +11,14 @@ with :func:`vdtn_marl.algos.baselines.make_rra_baseline`.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from vdtn_marl.sim.link import RRA_OBS_GAIN_SCALE_DB
+from vdtn_marl.sim.layout import RRA_OBS_GAIN_SCALE_DB, RRAFeatureLayout
 from vdtn_marl.sim.params import RadioParams
-from vdtn_marl.sim.twin import RRA_CONTROL_FEATURES
 
 _LN10_OVER_10 = math.log(10.0) / 10.0
-
-
-@dataclass(frozen=True)
-class RRAFeatureLayout:
-    """Where each feature block sits in an RRA observation of ``dim`` = 4M + 6 features.
-
-    Derived from :meth:`DigitalTwin._rra_observation_buffer` and
-    :func:`vdtn_marl.sim.link.rra_static_observation` (docs/model.md §4.6), for M sub-channels:
-
-    ====================  ============  ====================================================
-    block                 indices       content (per sub-channel where there are M of them)
-    ====================  ============  ====================================================
-    ``own_snr``           [0, M)        own V2V link SNR at maximum power, in 10 dB units
-    ``bs_interference``   [M, 2M)       INR it would cause at the BS at maximum power, 10 dB
-    ``v2i_interference``  [2M, 3M)      INR it receives from the V2I user of each
-                                        sub-channel, in 10 dB units
-    ``occupancy``         [3M, 4M)      V2V links that transmitted on it last subframe / L
-    ``bits_left``         4M            fraction of the CAM bits still to send
-    ``time_left``         4M + 1        fraction of the interval left
-    ``control``           [4M+2, dim)   e_p/15 m, e_v/10 m/s, a_pred/2.6, u_prev/2.6
-    ====================  ============  ====================================================
-
-    The three CSI blocks are clipped to ``RRA_OBS_GAIN_CLIP`` (−50 dB … 150 dB).
-    """
-
-    num_subchannels: int
-    own_snr: slice
-    bs_interference: slice
-    v2i_interference: slice
-    occupancy: slice
-    bits_left: int
-    time_left: int
-    control: slice
-    dim: int
-
-    @classmethod
-    def from_radio(cls, radio: RadioParams) -> RRAFeatureLayout:
-        m = radio.num_subchannels
-        return cls(
-            num_subchannels=m,
-            own_snr=slice(0, m),
-            bs_interference=slice(m, 2 * m),
-            v2i_interference=slice(2 * m, 3 * m),
-            occupancy=slice(3 * m, 4 * m),
-            bits_left=4 * m,
-            time_left=4 * m + 1,
-            control=slice(4 * m + 2, 4 * m + 2 + RRA_CONTROL_FEATURES),
-            dim=4 * m + 2 + RRA_CONTROL_FEATURES,
-        )
 
 
 def encode_rra_action(subchannel, power_level, num_power_levels: int):

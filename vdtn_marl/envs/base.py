@@ -15,10 +15,9 @@ import torch
 from pettingzoo import ParallelEnv
 
 from vdtn_marl.data.traces import TraceSource
-from vdtn_marl.sim.link import RRA_OBS_GAIN_CLIP
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
-from vdtn_marl.sim.twin import RRA_CONTROL_CLIP, DigitalTwin, IntervalRecord, resolve_device
+from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord, resolve_device
 
 RENDER_MODES = ("rgb_array",)
 
@@ -46,14 +45,8 @@ def vehicle_action_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
 
 
 def rra_observation_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
-    """Bounds of the RRA features (docs/model.md §4.6)."""
-    m = twin.num_subchannels
-    low = np.concatenate(
-        [np.full(3 * m, RRA_OBS_GAIN_CLIP[0]), np.zeros(m + 2), np.full(4, -RRA_CONTROL_CLIP)]
-    ).astype(np.float32)
-    high = np.concatenate(
-        [np.full(3 * m, RRA_OBS_GAIN_CLIP[1]), np.ones(m + 2), np.full(4, RRA_CONTROL_CLIP)]
-    ).astype(np.float32)
+    """Bounds of the RRA features (:data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`)."""
+    low, high = twin.rra_layout.bounds()
     return gymnasium.spaces.Box(low, high, dtype=np.float32)
 
 

@@ -47,6 +47,7 @@ from vdtn_marl.envs.rra_reward import RRAReward
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
 
@@ -271,6 +272,24 @@ class VDTNTorchRLEnv(EnvBase):
         self.full_action_spec = Composite(act, shape=(b,), device=dev)
         self.full_reward_spec = Composite(rew, shape=(b,), device=dev)
         self.full_done_spec = Composite(done, shape=(b,), device=dev)
+
+    # ------------------------------------------------------------------ state
+    #: What a snapshot of the environment holds (see :meth:`state_dict`).
+    _STATE_ATTRS = ("twin", "completion", "rra_policy", "control_module", "_vehicle_obs")
+
+    def state_dict(self) -> dict:
+        """The scenarios' state (the twin with its generator, the completion filter, the RRA
+        policy's generator, the vehicles' last observation) as plain containers of tensors
+        (:func:`~vdtn_marl.sim.snapshot.export_state`): saved in checkpoints, so scenarios that
+        persist across PPO iterations resume bit for bit. Policy weights are not included."""
+        holder = type("EnvState", (), {})()
+        for name in self._STATE_ATTRS:
+            setattr(holder, name, getattr(self, name))
+        return export_state(holder)
+
+    def load_state_dict(self, state: dict) -> None:
+        """Restore :meth:`state_dict` into an environment built with the same arguments."""
+        import_state(self, state)
 
     # ------------------------------------------------------------------ seeding
     def _set_seed(self, seed: int | None) -> None:

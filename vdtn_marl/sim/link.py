@@ -25,11 +25,8 @@ from vdtn_marl.sim.channel import (
     db_to_linear,
     rayleigh_power_gain,
 )
+from vdtn_marl.sim.layout import RRA_OBS_GAIN_CLIP, RRA_OBS_GAIN_SCALE_DB
 from vdtn_marl.sim.params import RadioParams
-
-#: RRA observation feature blocks, in order (docs/model.md §4.6).
-RRA_OBS_GAIN_SCALE_DB = 10.0  # dB values are divided by this
-RRA_OBS_GAIN_CLIP = (-5.0, 15.0)  # in units of 10 dB
 
 
 def _xp(x: Array):

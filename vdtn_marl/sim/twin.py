@@ -39,6 +39,7 @@ from vdtn_marl.data.traces import TraceSource, get_trace_source
 from vdtn_marl.sim import channel, link
 from vdtn_marl.sim.backend import (
     as_float,
+    cat,
     clamp,
     mean_axis,
     single_intra_op_thread,
@@ -46,6 +47,13 @@ from vdtn_marl.sim.backend import (
     to_numpy,
     to_torch,
     xp,
+)
+from vdtn_marl.sim.layout import (
+    RRA_CAM_AGE_CLIP_INTERVALS,
+    RRA_COMMAND_HISTORY,
+    RRA_CONTROL_CLIP,
+    RRA_DELAY_HISTORY,
+    RRAFeatureLayout,
 )
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.sim.platoon import (
@@ -60,9 +68,7 @@ from vdtn_marl.sim.platoon import (
     vehicle_observation,
 )
 
-#: Number of RRA control features per link appended to the CSI features.
-RRA_CONTROL_FEATURES = 4
-RRA_CONTROL_CLIP = 5.0
+__all__ = ["RRA_CONTROL_CLIP", "DigitalTwin", "IntervalRecord", "resolve_device"]
 
 
 @dataclass
@@ -179,7 +185,8 @@ class DigitalTwin:
         self.subframes_per_interval = pp.subframes_per_interval
         self.subframe_ms = pp.subframe_s * 1000.0
         self.interval_ms = pp.control_interval_s * 1000.0
-        self.rra_obs_dim = 4 * rp.num_subchannels + 2 + RRA_CONTROL_FEATURES
+        self.rra_layout = RRAFeatureLayout.from_radio(rp)
+        self.rra_obs_dim = self.rra_layout.dim
         self.integrator = IntervalIntegrator(pp, self.device)
         t = pp.subframes_per_interval  # fraction of the interval left at each subframe, [T]
         self._time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
@@ -250,6 +257,10 @@ class DigitalTwin:
             self.interval = torch.zeros(b, dtype=torch.long, device=dev)
             self.cam_held = cam_held
             self.cam_held_interval = torch.full((b, self.num_followers), -1, device=dev)
+            self.cam_delay_history = torch.zeros(b, self.num_links, RRA_DELAY_HISTORY, device=dev)
+            self.command_history = torch.zeros(
+                b, self.num_followers, RRA_COMMAND_HISTORY, device=dev
+            )
             self.begin_interval()
             return
         idx = mask.nonzero().squeeze(-1)
@@ -267,6 +278,8 @@ class DigitalTwin:
         self.interval[idx] = 0
         self.cam_held[idx] = cam_held
         self.cam_held_interval[idx] = -1
+        self.cam_delay_history[idx] = 0.0
+        self.command_history[idx] = 0.0
         self.begin_interval(mask)
 
     @staticmethod
@@ -404,17 +417,14 @@ class DigitalTwin:
         return link.build_interval_tables(v2v_db, v2i_db, rp, self.subframes_per_interval, g)
 
     def _rra_observation_buffer(self, tables: link.IntervalTables):
-        """[T, B, L, D]: CSI, occupancy and bits left (filled per subframe), time, control.
+        """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
+        occupancy and bits left (filled per subframe), time left, the recipients' control
+        state and the features that predict their IVoI (constant over the interval).
 
         A tensor, or a NumPy array on the NumPy backend.
         """
-        t, b, n_l, m = (
-            self.subframes_per_interval,
-            self.batch_size,
-            self.num_links,
-            self.num_subchannels,
-        )
-        pp = self.params.platoon
+        t, b, n_l = self.subframes_per_interval, self.batch_size, self.num_links
+        pp, lay, native = self.params.platoon, self.rra_layout, self._native
         platoon = self._native_platoon()
         csi = link.rra_static_observation(tables, self.params.radio, self._const_torch.noise_mw)
         gap_error, speed_error = spacing_errors(platoon, pp)
@@ -430,15 +440,22 @@ class DigitalTwin:
             -RRA_CONTROL_CLIP,
             RRA_CONTROL_CLIP,
         )
+        age = as_float(native(self.interval)[:, None] - native(self.cam_held_interval))
+        history = clamp(
+            native(self.command_history) / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
+        )
         if self._numpy:
             obs = np.empty((t, b, n_l, self.rra_obs_dim), np.float32)
         else:
             obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
-        obs[..., : 3 * m] = csi
-        obs[..., 3 * m : 4 * m] = 0.0
-        obs[..., 4 * m] = 1.0
-        obs[..., 4 * m + 1] = self._time_left[:, None, None]
-        obs[..., 4 * m + 2 :] = control
+        obs[..., lay.csi] = csi
+        obs[..., lay.occupancy] = 0.0
+        obs[..., lay.bits_left] = 1.0
+        obs[..., lay.time_left] = self._time_left[:, None, None]
+        obs[..., lay.control] = control
+        obs[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
+        obs[..., lay["cam_delay_history"]] = native(self.cam_delay_history)
+        obs[..., lay["command_history"]] = history
         return obs
 
     # ------------------------------------------------------------------ subframes
@@ -508,12 +525,12 @@ class DigitalTwin:
         slot, but calling this again before the next subframe rewrites the same slot in place.
         Copy it if you keep it.
         """
-        m = self.num_subchannels
+        lay = self.rra_layout
         t = min(self.subframe, self.subframes_per_interval - 1)
         obs = self._rra_obs[t]
-        obs[..., 3 * m : 4 * m] = self.link_state.occupancy[:, None, :] / self.num_links
+        obs[..., lay.occupancy] = self.link_state.occupancy[:, None, :] / self.num_links
         remaining = self.link_state.remaining_bits / self.params.radio.cam_size_bits
-        obs[..., 4 * m] = clamp(remaining, 0.0, 1.0)
+        obs[..., lay.bits_left] = clamp(remaining, 0.0, 1.0)
         return obs
 
     # ------------------------------------------------------------------ interval end
@@ -679,6 +696,19 @@ class DigitalTwin:
                 mean_rate = np.zeros((self.batch_size, self.num_subchannels), np.float32)
             else:
                 mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+        # the recipients' histories the next interval's RRA observation reads
+        delay_fraction = clamp(as_float(delay) / (t + 1), 0.0, 1.0)
+        self.cam_delay_history = public(
+            cat([delay_fraction[..., None], native(self.cam_delay_history)[..., :-1]])
+        )
+        self.command_history = public(
+            cat(
+                [
+                    before.command_mps2[:, 1:, None],
+                    native(self.command_history)[..., :-1],
+                ]
+            )
+        )
         record = IntervalRecord(
             interval=public(interval.copy() if self._numpy else interval.clone()),
             state_before=self.platoon,
