@@ -9,6 +9,7 @@ import math
 import os
 import subprocess
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -37,16 +38,103 @@ PLOT_KINDS = (
 # --- statistics on known inputs ------------------------------------------------------------
 
 
+T_4_975 = 2.7764451051977987  # t quantile, 4 degrees of freedom, 0.975 (tables: 2.776)
+
+
+def test_t_interval_of_a_small_sample_by_hand():
+    # [1, 2, 3, 4, 5]: mean 3, s = sqrt(2.5) = 1.5811, half-width 2.7764 * 1.5811 / sqrt(5)
+    half = T_4_975 * math.sqrt(2.5) / math.sqrt(5)
+    assert half == pytest.approx(1.963243, abs=1e-6)
+    for mean, low, high in (
+        leaderboard.t_ci([1, 2, 3, 4, 5]),
+        leaderboard.mean_ci([1, 2, 3, 4, 5]),  # t is the default
+        leaderboard.mean_ci([5, 4, 3, 2, 1], confidence=0.95, interval="t"),
+    ):
+        assert mean == 3.0
+        assert (low, high) == (pytest.approx(3 - half, abs=1e-9), pytest.approx(3 + half, abs=1e-9))
+    stats = leaderboard.aggregate([1.0, 2.0, 3.0, 4.0, 5.0])
+    assert (stats["ci_low"], stats["ci_high"]) == (pytest.approx(1.036757), pytest.approx(4.963243))
+    assert stats["ci_method"] == "t"
+    # 90%: t(4, 0.95) = 2.1318
+    _, low, high = leaderboard.t_ci([1, 2, 3, 4, 5], confidence=0.9)
+    assert high - 3 == pytest.approx(2.131847 * math.sqrt(2.5 / 5), abs=1e-6)
+    assert low == pytest.approx(3 - (high - 3))
+
+
 def test_aggregate_known_values():
-    stats = leaderboard.aggregate([1.0, 2.0, 3.0, 4.0, 10.0], resamples=5000)
+    values = [1.0, 2.0, 3.0, 4.0, 10.0]
+    stats = leaderboard.aggregate(values)
     assert stats["n"] == 5
     assert stats["mean"] == pytest.approx(4.0)
-    assert stats["std"] == pytest.approx(np.std([1, 2, 3, 4, 10], ddof=1))
-    assert stats["iqm"] == pytest.approx(3.0)  # 25% cut on each side: mean of 2, 3, 4
-    assert stats["ci_low"] <= stats["mean"] <= stats["ci_high"]
-    assert stats["iqm_ci_low"] <= stats["iqm"] <= stats["iqm_ci_high"]
-    # a percentile bootstrap of the mean stays inside the sample's range
-    assert 1.0 <= stats["ci_low"] < 4.0 < stats["ci_high"] <= 10.0
+    assert stats["std"] == pytest.approx(np.std(values, ddof=1))
+    half = T_4_975 * float(np.std(values, ddof=1)) / math.sqrt(5)
+    assert (stats["ci_low"], stats["ci_high"]) == (pytest.approx(4 - half), pytest.approx(4 + half))
+    assert stats["ci_low"] < 1.0  # a t interval may leave the sample's range
+    assert stats["iqm"] is None and stats["iqm_ci_method"] is None  # 5 < MIN_RUNS_FOR_IQM
+    boot = leaderboard.aggregate(values, resamples=5000, interval="percentile")
+    assert boot["ci_method"] == "percentile" and boot["mean"] == pytest.approx(4.0)
+    # a percentile bootstrap of the mean stays inside the sample's range, and is narrower
+    assert 1.0 <= boot["ci_low"] < 4.0 < boot["ci_high"] <= 10.0
+    assert boot["ci_high"] - boot["ci_low"] < 0.75 * (stats["ci_high"] - stats["ci_low"])
+    bca = leaderboard.aggregate(values, resamples=5000, interval="bca")
+    assert bca["ci_method"] == "bca"
+    assert bca["ci_low"] < 4.0 < bca["ci_high"]
+    assert (bca["ci_low"], bca["ci_high"]) != (boot["ci_low"], boot["ci_high"])
+
+
+def test_iqm_needs_ten_runs():
+    assert leaderboard.MIN_RUNS_FOR_IQM == 10
+    nine = leaderboard.aggregate([1, 2, 3, 4, 5, 6, 7, 8, 100], resamples=1000)
+    assert nine["n"] == 9 and nine["mean"] == pytest.approx(136 / 9)
+    assert all(nine[k] is None for k in ("iqm", "iqm_ci_low", "iqm_ci_high", "iqm_ci_method"))
+    ten = leaderboard.aggregate([1, 2, 3, 4, 5, 6, 7, 8, 9, 100], resamples=1000)
+    assert ten["iqm"] == pytest.approx(5.5)  # 2 cut on each side: mean of 3..8
+    assert ten["iqm_ci_method"] == "bca"  # no t interval for the IQM: BCa under interval=t
+    assert ten["iqm_ci_low"] < 5.5 < ten["iqm_ci_high"] < 100
+    assert ten["ci_method"] == "t"
+    boot = leaderboard.aggregate([1, 2, 3, 4, 5, 6, 7, 8, 9, 100], 1000, interval="percentile")
+    assert boot["iqm_ci_method"] == "percentile" and boot["iqm"] == pytest.approx(5.5)
+
+
+def test_bca_falls_back_to_the_percentile_bootstrap_on_degenerate_samples():
+    # the IQM's jackknife values of nine equal runs and one other are all equal: BCa undefined
+    values = [0.0] * 9 + [1.0]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning escapes, no NaN bound
+        for interval in ("t", "bca"):
+            stats = leaderboard.aggregate(values, resamples=1000, interval=interval)
+            assert stats["iqm"] == 0.0 and stats["iqm_ci_method"] == "percentile"
+            assert stats["iqm_ci_low"] == 0.0 and math.isfinite(stats["iqm_ci_high"])
+        # the mean's BCa interval is defined here and stays BCa
+        assert stats["ci_method"] == "bca" and stats["ci_low"] <= 0.1 <= stats["ci_high"]
+        point, low, high = leaderboard.bootstrap_ci(values, np.median, 500, method="bca")
+        assert point == low == 0.0 and math.isfinite(high)
+
+
+def test_interval_must_be_a_known_method():
+    with pytest.raises(ValueError, match=r"interval='normal' is not allowed; choose one of t, bca"):
+        leaderboard.aggregate([1.0, 2.0], interval="normal")
+    with pytest.raises(ValueError, match=r"interval='t' is not allowed; choose one of bca, perc"):
+        leaderboard.bootstrap_ci([1.0, 2.0], np.mean, method="t")
+
+
+def test_t_interval_covers_at_its_level_where_the_percentile_bootstrap_does_not():
+    """2000 samples of n = 5 from N(0, 1): the 95% t interval covers 0 in about 95% of them,
+    the 95% percentile bootstrap (200 resamples each) in only about 83%."""
+    samples = np.random.default_rng(12345).standard_normal((2000, 5))
+    t_cover = np.mean([low <= 0.0 <= high for _, low, high in map(leaderboard.t_ci, samples)])
+    boot_cover = np.mean(
+        [
+            low <= 0.0 <= high
+            for _, low, high in (
+                leaderboard.bootstrap_ci(x, np.mean, resamples=200, seed=i)
+                for i, x in enumerate(samples)
+            )
+        ]
+    )
+    assert 0.93 <= t_cover <= 0.97, t_cover
+    assert boot_cover < 0.91, boot_cover
+    assert boot_cover > 0.75, boot_cover  # and it is an interval, not a point
 
 
 def test_aggregate_is_deterministic_and_ignores_missing_values():
@@ -63,8 +151,14 @@ def test_aggregate_degenerate_samples():
     assert (one["n"], one["mean"], one["ci_low"], one["ci_high"], one["std"]) == (
         1, 2.5, 2.5, 2.5, 0.0,
     )  # fmt: skip
-    same = leaderboard.aggregate([1.0] * 6)
+    same = leaderboard.aggregate([1.0] * 10)
     assert same["ci_low"] == same["ci_high"] == same["mean"] == same["iqm"] == 1.0
+    assert same["iqm_ci_low"] == same["iqm_ci_high"] == 1.0
+    for interval in leaderboard.INTERVALS:  # zero width whatever the method
+        for values in ([2.5], [3.0] * 4):
+            stat = leaderboard.aggregate(values, interval=interval)
+            assert stat["ci_low"] == stat["ci_high"] == stat["mean"], (interval, values)
+            assert stat["ci_method"] == interval
     empty = leaderboard.aggregate([None, float("nan")])
     assert empty["n"] == 0 and all(empty[k] is None for k in leaderboard.STAT_KEYS if k != "n")
 
@@ -75,6 +169,67 @@ def test_bootstrap_ci_width_matches_normal_theory():
     half_width = 1.96 * x.std(ddof=1) / math.sqrt(x.size)
     assert low < mean < high
     assert (high - low) / 2 == pytest.approx(half_width, rel=0.15)
+
+
+def _paired_rows(a: list[float], b: list[float]) -> list[dict]:
+    rows = []
+    for method, values in (("a", a), ("b", b)):
+        for seed, value in enumerate(values):
+            rows.append({"scenario": "platoon4", "method": method, "seed": seed,
+                         "control_cost": value})  # fmt: skip
+    return rows
+
+
+def test_paired_differences_get_a_t_interval_of_the_differences():
+    b = [10.0, 20.0, 5.0, 40.0, 30.0]  # seeds differ a lot, the method difference little
+    a = [x + d for x, d in zip(b, [0.1, 0.3, 0.2, 0.5, 0.4], strict=True)]
+    benchmark = config.BenchmarkConfig(
+        name="t", methods={"a": [], "b": []}, seeds=[0, 1, 2, 3, 4], trace_methods=["a", "b"]
+    )
+    paired = leaderboard.paired_differences(_paired_rows(a, b), benchmark)
+    pair = paired["platoon4"]
+    assert (pair["a"], pair["b"], pair["seeds"]) == ("a", "b", [0, 1, 2, 3, 4])
+    diff = pair["differences"]["control_cost"]
+    # differences 0.1..0.5: mean 0.3, s = sqrt(0.025), half-width t(4) * s / sqrt(5)
+    half = T_4_975 * math.sqrt(0.025) / math.sqrt(5)
+    assert diff["n"] == 5 and diff["ci_method"] == "t"
+    assert diff["mean"] == pytest.approx(0.3)
+    assert (diff["ci_low"], diff["ci_high"]) == (
+        pytest.approx(0.3 - half), pytest.approx(0.3 + half),
+    )  # fmt: skip
+    assert diff["ci_low"] > 0  # paired: the method difference is clear despite the seeds
+    unpaired = leaderboard.statistics(_paired_rows(a, b), benchmark)["platoon4"]
+    assert unpaired["a"]["control_cost"]["ci_high"] - unpaired["a"]["control_cost"]["ci_low"] > 20
+    benchmark.interval = "percentile"
+    boot = leaderboard.paired_differences(_paired_rows(a, b), benchmark)["platoon4"]
+    assert boot["differences"]["control_cost"]["ci_method"] == "percentile"
+    assert 0.1 <= boot["differences"]["control_cost"]["ci_low"] < 0.3
+
+
+def test_report_names_the_interval_and_why_the_iqm_is_missing():
+    from vdtn_marl.leaderboard.report import _iqm_omitted_line
+
+    text = leaderboard.describe_interval("t", 0.95, 2000)
+    assert text["short"] == "95% Student-t CI"
+    assert "scipy.stats.t" in text["mean"]
+    assert text["iqm"].startswith("95% BCa bootstrap CI (2000 resamples")
+    assert text["iqm"].endswith("; a t interval is not defined for the IQM)")
+    assert leaderboard.describe_interval("bca", 0.95, 2000)["iqm"] == (
+        "95% BCa bootstrap CI (2000 resamples, scipy.stats.bootstrap; percentile where BCa is "
+        "undefined)"
+    )
+    assert leaderboard.describe_interval("bca")["short"] == "95% BCa bootstrap CI"
+    boot = leaderboard.describe_interval("percentile", 0.9)
+    assert boot["short"] == "90% percentile-bootstrap CI"
+    assert boot["iqm"] == "90% percentile-bootstrap CI (10000 resamples, scipy.stats.bootstrap)"
+    five = {m: {"control_cost": {"n": 5}} for m in ("a", "b")}
+    assert _iqm_omitted_line(five) == (
+        "IQM not reported: 5 run(s) per method, fewer than the 10 it needs (the middle half of "
+        "fewer runs is too few values for a useful estimate)."
+    )
+    mixed = {"a": {"control_cost": {"n": 10}}, "b": {"control_cost": {"n": 9}}}
+    assert _iqm_omitted_line(mixed).startswith("IQM not reported (b): 9 run(s)")
+    assert _iqm_omitted_line({"a": {"control_cost": {"n": 10}}}) is None
 
 
 def test_best_methods_follow_direction_and_keep_ties():
@@ -133,6 +288,10 @@ def _bench(**changes) -> config.BenchConfig:
         ({"methods": {"a b": []}}, "not a plain name"),
         ({"version": ""}, "benchmark.version"),
         ({"bootstrap_resamples": 10}, "benchmark.bootstrap_resamples=10"),
+        (
+            {"interval": "normal"},
+            "benchmark.interval='normal' is not allowed; choose one of t, bca, percentile",
+        ),
     ],
 )
 def test_bad_benchmarks_are_rejected(changes, message):
@@ -170,6 +329,19 @@ def test_bench_rejects_unequal_evaluation_budgets_before_running(tmp_path, capsy
     assert code == cli.EXIT_CONFIG_ERROR
     assert "must be evaluated on the same held-out scenarios" in capsys.readouterr().err
     assert not (tmp_path / "o").exists()
+
+
+def test_bench_rejects_an_unknown_interval_in_one_line(tmp_path, capsys):
+    code = cli.main(
+        ["bench", "benchmark=smoke", f"out_dir={tmp_path / 'o'}", "benchmark.interval=normal"]
+    )
+    assert code == cli.EXIT_CONFIG_ERROR
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "error: benchmark.interval='normal' is not allowed; choose one of t, bca, percentile"
+    )
+    assert not (tmp_path / "o").exists()
+    assert config.BenchmarkConfig().interval == "t"  # the shipped YAML files need no key
 
 
 def test_out_dir_of_another_definition_is_refused(tmp_path):
@@ -257,6 +429,10 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
                 for name in ("mean", "ci_low", "ci_high", "std"):
                     assert math.isfinite(stat[name]), (method, key, name)
                 assert stat["ci_low"] <= stat["mean"] <= stat["ci_high"], (method, key)
+                assert stat["ci_method"] == "t" and stat["iqm"] is None, (method, key)
+    method_info = data["statistics_method"]
+    assert (method_info["interval_method"], method_info["iqm_interval_method"]) == ("t", "bca")
+    assert method_info["interval"].startswith("95% Student-t CI")
     runs = data["runs"]
     assert len(runs) == 12
     assert {r["version"] for r in runs} == {b.version}
@@ -296,6 +472,13 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert f"`{b.name}` v{b.version}" in text
     assert "vdtn-marl bench benchmark=smoke" in text
     assert "## platoon4" in text and "**" in text  # a table per scenario, best marked
+    assert "mean with its 95% Student-t CI (mean ± t(n−1) · s/√n, scipy.stats.t)" in text
+    assert "a t interval is not defined for the IQM" in text
+    assert "seeds [95% Student-t CI]:" in text  # the paired differences
+    assert "percentile-bootstrap" not in text
+    assert text.count("IQM not reported: 2 run(s) per method, fewer than the 10") == len(
+        b.scenarios
+    )
     assert "- **leader traces**: platoon4: `udds` (EPA Urban" in text  # the scenario's default
     assert "training draws from the first 80% of each drive" in text
     for method in b.methods:

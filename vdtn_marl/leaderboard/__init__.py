@@ -12,8 +12,10 @@ evaluated on the same held-out leader traces, initial states and channel draws.
 jobs of a Hydra sweep), skipping every cell whose ``summary.json`` is complete, so rerunning the
 same command resumes it; an interrupted cell continues from its last checkpoint. Then
 :func:`write_report` aggregates every metric per scenario × method across seeds (mean with a
-percentile-bootstrap confidence interval, and the interquartile mean, IQM, with its interval
-where there are at least :data:`MIN_RUNS_FOR_IQM` runs) and writes, into ``report_dir``:
+confidence interval chosen by ``benchmark.interval``: Student-t by default, or the BCa or
+percentile bootstrap; the interquartile mean, IQM, with a bootstrap interval where there are
+at least :data:`~vdtn_marl.leaderboard.stats.MIN_RUNS_FOR_IQM` runs; see
+:mod:`~vdtn_marl.leaderboard.stats`) and writes, into ``report_dir``:
 
 - ``LEADERBOARD.md``: one table per scenario, the best mean per column in bold, the version
   and the exact command on top, the two ``trace_methods`` compared paired by seed (both see
@@ -65,13 +67,18 @@ from vdtn_marl.leaderboard.report import (
 )
 from vdtn_marl.leaderboard.runner import BenchmarkResult, run_benchmark
 from vdtn_marl.leaderboard.stats import (
+    INTERVALS,
+    MIN_RUNS_FOR_IQM,
     STAT_KEYS,
     aggregate,
     best_methods,
     bootstrap_ci,
+    describe_interval,
     marl_eval_data,
+    mean_ci,
     paired_differences,
     statistics,
+    t_ci,
 )
 
 
@@ -86,10 +93,12 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 __all__ = [
     "CAM_LATENCY_KEYS",
+    "INTERVALS",
     "MANIFEST_FILE",
     "MARL_EVAL_JSON",
     "METRICS",
     "METRIC_KEYS",
+    "MIN_RUNS_FOR_IQM",
     "REPORT_FILE",
     "RUNS_CSV",
     "STATS_CSV",
@@ -108,13 +117,16 @@ __all__ = [
     "check_out_dir",
     "complete_summary",
     "compose_cell",
+    "describe_interval",
     "main",
     "manifest",
     "marl_eval_data",
+    "mean_ci",
     "paired_differences",
     "plan",
     "print_leaderboard",
     "run_benchmark",
     "statistics",
+    "t_ci",
     "write_report",
 ]

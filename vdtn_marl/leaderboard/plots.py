@@ -12,6 +12,7 @@ from typing import Any
 from vdtn_marl import __version__
 from vdtn_marl.config import BenchConfig
 from vdtn_marl.leaderboard.grid import Cell
+from vdtn_marl.leaderboard.stats import describe_interval
 from vdtn_marl.results import is_finite
 from vdtn_marl.runs import (
     CONFIG_FILE,
@@ -45,6 +46,7 @@ def write_plots(
 
     b = cfg.benchmark
     note = f"vdtn-marl {__version__} · benchmark {b.name} v{b.version}"
+    ci = describe_interval(b.interval, b.confidence, b.bootstrap_resamples)["short"]
     out: dict[str, dict[str, Path]] = {}
     for scenario, by_method in stats.items():
         plots: dict[str, Path] = {}
@@ -91,7 +93,7 @@ def write_plots(
                 bars,
                 report_dir / f"{prefix}{kind}.png",
                 ylabel,
-                title=f"{scenario}: mean over seeds, {b.confidence:.0%} bootstrap CI, dots = runs",
+                title=f"{scenario}: mean over seeds, {ci}, dots = runs",
                 note=note,
             )
 

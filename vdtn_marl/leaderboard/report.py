@@ -31,6 +31,8 @@ from vdtn_marl.leaderboard.stats import (
     MIN_RUNS_FOR_IQM,
     best_methods,
     collect_runs,
+    describe_interval,
+    iqm_interval,
     marl_eval_data,
     paired_differences,
     statistics,
@@ -134,6 +136,36 @@ def _png(path: Path) -> str:
     return path.name
 
 
+def _bca_fallbacks(stats: Mapping[str, Any], paired: Mapping[str, Any]) -> int:
+    """How many intervals asked BCa and got the percentile bootstrap (BCa undefined)."""
+    groups = [m for by_method in stats.values() for m in by_method.values()]
+    groups += [p["differences"] for p in paired.values()]
+    return sum(
+        stat.get(key) == "percentile"
+        for metrics in groups
+        for stat in metrics.values()
+        for key in ("ci_method", "iqm_ci_method")
+    )
+
+
+def _iqm_omitted_line(by_method: Mapping[str, Mapping[str, Any]]) -> str | None:
+    """One line saying why the IQM is left out (fewer than MIN_RUNS_FOR_IQM runs)."""
+    short = {
+        method: metrics["control_cost"]["n"]
+        for method, metrics in by_method.items()
+        if metrics["control_cost"]["n"] < MIN_RUNS_FOR_IQM
+    }
+    if not short:
+        return None
+    counts = sorted(set(short.values()))
+    n = ", ".join(str(c) for c in counts)
+    which = "" if len(short) == len(by_method) else f" ({', '.join(short)})"
+    return (
+        f"IQM not reported{which}: {n} run(s) per method, fewer than the {MIN_RUNS_FOR_IQM} "
+        "it needs (the middle half of fewer runs is too few values for a useful estimate)."
+    )
+
+
 def _markdown(
     cfg: BenchConfig,
     rows: Sequence[Mapping[str, Any]],
@@ -148,6 +180,9 @@ def _markdown(
 ) -> str:
     b = cfg.benchmark
     table_metrics = [m for m in METRICS if m.table]
+    ci = describe_interval(b.interval, b.confidence, b.bootstrap_resamples)
+    iqm_ci = describe_interval(iqm_interval(b.interval), b.confidence, b.bootstrap_resamples)
+    fallbacks = _bca_fallbacks(stats, paired)
     lines = [
         f"# Leaderboard: `{b.name}` v{b.version}",
         "",
@@ -158,14 +193,20 @@ def _markdown(
         f"{platform.machine()} ({platform.python_implementation()} "
         f"{platform.python_version()})",
         *_budget_lines(cfg, composed, rows),
-        f"- **statistics**: per scenario × method across seeds: mean with its "
-        f"{b.confidence:.0%} percentile-bootstrap CI ({b.bootstrap_resamples} resamples, "
-        "scipy.stats.bootstrap), IQM (interquartile mean) with its CI where there are "
-        f"≥ {MIN_RUNS_FOR_IQM} runs. Every method is evaluated on the same held-out scenarios "
+        f"- **statistics**: per scenario × method across seeds (`benchmark.interval="
+        f"{b.interval}`): mean with its {ci['mean']}; IQM (interquartile mean), where there "
+        f"are ≥ {MIN_RUNS_FOR_IQM} runs, with its {ci['iqm']}; paired differences with the "
+        "mean's interval. Every method is evaluated on the same held-out scenarios "
         "(same evaluation seed per run seed). **Bold**: best mean of a column (↓ lower is "
         "better, ↑ higher); EVoI = J̃ − J* (discounted return of the acting system minus that "
         "of π* with perfect observation, per follower) has no best.",
     ]
+    if fallbacks:
+        lines.append(
+            f"- **BCa undefined** for {fallbacks} interval(s) (degenerate samples, e.g. all runs "
+            "but one or two equal): those use the percentile bootstrap (`ci_method` / "
+            f"`iqm_ci_method` in {STATS_JSON})"
+        )
     if n_done < n_cells:
         lines.append(
             f"- **incomplete**: {n_done} of {n_cells} runs are complete; rerun the command to "
@@ -204,7 +245,7 @@ def _markdown(
         if any(metrics["control_cost"]["iqm"] is not None for metrics in by_method.values()):
             lines += [
                 "",
-                "<details><summary>IQM (interquartile mean) [95% CI]</summary>",
+                f"<details><summary>IQM (interquartile mean) [{iqm_ci['short']}]</summary>",
                 "",
                 "| method | " + " | ".join(m.label for m in table_metrics) + " |",
                 "|" + "|".join(["---"] + ["--:"] * len(table_metrics)) + "|",
@@ -213,13 +254,15 @@ def _markdown(
                 cells = [method] + [_stat_cell(metrics[m.key], "iqm") for m in table_metrics]
                 lines.append("| " + " | ".join(cells) + " |")
             lines += ["", "</details>"]
+        omitted = _iqm_omitted_line(by_method)
+        if omitted:
+            lines += ["", omitted]
         pair = paired.get(scenario)
         if pair:
             lines += [
                 "",
                 f"Paired by seed (same held-out scenarios): **{pair['a']} − {pair['b']}**, "
-                f"mean difference over {len(pair['seeds'])} seeds [{b.confidence:.0%} "
-                "bootstrap CI]:",
+                f"mean difference over {len(pair['seeds'])} seeds [{ci['short']}]:",
                 "",
                 "| " + " | ".join(m.label for m in table_metrics) + " |",
                 "|" + "|".join(["--:"] * len(table_metrics)) + "|",
@@ -297,6 +340,8 @@ def write_report(
     paired = paired_differences(rows, b)
     plots = write_plots(cfg, rows, stats, report_dir)
     marl_eval, dropped = marl_eval_data(rows, b)
+    ci = describe_interval(b.interval, b.confidence, b.bootstrap_resamples)
+    fallbacks = _bca_fallbacks(stats, paired)
     header = {
         "benchmark": b.name,
         "version": b.version,
@@ -311,10 +356,17 @@ def write_report(
         {
             **header,
             "statistics_method": {
-                "interval": f"{b.confidence:.0%} percentile bootstrap across seeds "
-                "(scipy.stats.bootstrap)",
+                "interval_method": b.interval,
+                "interval": f"{ci['mean']} across seeds, of means and of paired differences",
+                "confidence": b.confidence,
                 "resamples": b.bootstrap_resamples,
-                "iqm": f"scipy.stats.trim_mean(values, {IQM_TRIM}) where n >= {MIN_RUNS_FOR_IQM}",
+                "iqm": f"scipy.stats.trim_mean(values, {IQM_TRIM}) where n >= {MIN_RUNS_FOR_IQM} "
+                "(else null)",
+                "iqm_interval_method": iqm_interval(b.interval),
+                "iqm_interval": ci["iqm"],
+                "bca_fallback": "where BCa is undefined (degenerate samples) the percentile "
+                "bootstrap is used; ci_method / iqm_ci_method name the interval of each "
+                f"statistic ({fallbacks} fallback(s) here)",
                 "non_finite": "left out (n counts the finite values)",
             },
             "cells": {"total": len(cells), "complete": len(rows)},
