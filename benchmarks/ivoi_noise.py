@@ -35,7 +35,15 @@ from rich.table import Table
 
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.benchmarking import parse_numbers, parse_seeds, provenance
-from vdtn_marl.config import ExperimentConfig, RRAConfig, RunConfig, ScenarioConfig, validate
+from vdtn_marl.config import (
+    AlgoConfig,
+    ControlConfig,
+    ExperimentConfig,
+    RRAConfig,
+    RunConfig,
+    ScenarioConfig,
+    validate,
+)
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
@@ -62,15 +70,40 @@ class SyntheticIVoI:
         return self.effect * delivered + self.noise * noise
 
 
-def reduced_config(seed: int, kappa1: float = 0.0, traces: str = "synthetic") -> RunConfig:
+#: ``--credit`` settings of the RRA learning problem: ``paper`` is the default (credit
+#: discounted per control interval, silent subframes masked, scenarios persisting across PPO
+#: iterations, 32 scenarios × 5 intervals per batch); ``legacy`` the setting before it (γ and λ
+#: per subframe, every subframe trains, fresh resets, 64 scenarios × 2 intervals).
+CREDITS = {
+    "paper": {},
+    "legacy": dict(
+        rra_credit="subframe", rra_mask_silent=False, persistent_envs=False,
+        rra_num_envs=64, rra_rollout_steps=100,
+    ),
+}  # fmt: skip
+
+
+def reduced_config(
+    seed: int,
+    kappa1: float = 0.0,
+    traces: str = "synthetic",
+    credit: str = "paper",
+    rra_iterations: int = 16,
+) -> RunConfig:
     """JOCC with ``kappa1`` (κ2 = 1 − κ1) at the ``reduced`` leaderboard budgets (platoon4
-    defaults, leader traces ``traces``)."""
+    defaults, leader traces ``traces``; π* from the CACC prior: the synthetic ξ does not read
+    it), with the RRA learning problem of ``credit`` (:data:`CREDITS`)."""
     experiment = replace(
-        ExperimentConfig(), control_iterations=8, rra_iterations=16, checkpoint_every=0
+        ExperimentConfig(),
+        control_iterations=8,
+        rra_iterations=rra_iterations,
+        checkpoint_every=0,
     )
     return RunConfig(
         scenario=ScenarioConfig(traces=traces),
         rra=RRAConfig(name="jocc", kappa1=kappa1),
+        control=ControlConfig(warm_start="none"),
+        algo=replace(AlgoConfig(), **CREDITS[credit]),
         experiment=experiment,
         seed=seed,
         progress=False,
@@ -105,8 +138,20 @@ def main(argv: list[str] | None = None) -> int:
         help="leader trace set (default synthetic, with which the committed figures were "
         "measured; runs default to udds)",
     )
+    parser.add_argument(
+        "--credit",
+        default="paper",
+        help=f"RRA learning problems to compare, paired by seed: {', '.join(CREDITS)}",
+    )
+    parser.add_argument("--rra-iterations", type=int, default=16, help="RRA PPO iterations")
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
+    credits = args.credit.split(",")
+    for credit in credits:
+        if credit not in CREDITS:
+            raise SystemExit(f"--credit {credit!r} must be one of {', '.join(CREDITS)}")
+    if args.rra_iterations < 1:
+        raise SystemExit(f"--rra-iterations {args.rra_iterations!r} must be >= 1")
     seeds = parse_seeds("--seeds", args.seeds)
     noises = parse_numbers("--noise", args.noise)
     if not 0.0 <= args.kappa1 < 1.0:
@@ -115,31 +160,35 @@ def main(argv: list[str] | None = None) -> int:
     console = Console()
     began = time.perf_counter()
     rows = []
-    for noise in noises:
-        for seed in seeds:
-            start = time.perf_counter()
-            summary = train_with_synthetic_ivoi(
-                reduced_config(seed, args.kappa1, args.traces), args.effect, noise
-            )
-            rows.append(
-                {
-                    "noise": noise,
-                    "seed": seed,
-                    "cam_delivery_rate": summary["cam_delivery_rate"],
-                    "v2i_throughput_mbps_per_link": summary["v2i_throughput_mbps_per_link"],
-                    "control_cost": summary["control_cost"],
-                    "seconds": time.perf_counter() - start,
-                }
-            )
-            console.print(
-                f"noise {noise:g}, seed {seed}: CAM delivery {summary['cam_delivery_rate']:.3f}"
-            )
+    for credit in credits:
+        for noise in noises:
+            for seed in seeds:
+                start = time.perf_counter()
+                cfg = reduced_config(seed, args.kappa1, args.traces, credit, args.rra_iterations)
+                summary = train_with_synthetic_ivoi(cfg, args.effect, noise)
+                rows.append(
+                    {
+                        "credit": credit,
+                        "noise": noise,
+                        "seed": seed,
+                        "cam_delivery_rate": summary["cam_delivery_rate"],
+                        "v2i_throughput_mbps_per_link": summary["v2i_throughput_mbps_per_link"],
+                        "control_cost": summary["control_cost"],
+                        "seconds": time.perf_counter() - start,
+                    }
+                )
+                console.print(
+                    f"{credit}, noise {noise:g}, seed {seed}: "
+                    f"CAM delivery {summary['cam_delivery_rate']:.3f}"
+                )
     title = f"RRA trained on ξ = {args.effect:g}·1[delivered] + noise·N(0,1), κ1 = {args.kappa1:g}"
     table = Table(title=escape(title))
-    for column in ("noise", "seed", "CAM delivery", "V2I per link (Mbps)", "control cost"):
+    columns = ("credit", "noise", "seed", "CAM delivery", "V2I per link (Mbps)", "control cost")
+    for column in columns:
         table.add_column(column, justify="right")
     for row in rows:
         table.add_row(
+            row["credit"],
             f"{row['noise']:g}",
             str(row["seed"]),
             f"{row['cam_delivery_rate']:.3f}",
@@ -154,7 +203,8 @@ def main(argv: list[str] | None = None) -> int:
             "effect": args.effect,
             "kappa1": args.kappa1,
             "traces": args.traces,
-            "budget": "reduced: 8 PPO iterations for π* and π̃, 16 for the RRA agents",
+            "credits": {c: CREDITS[c] for c in credits},
+            "budget": f"8 PPO iterations for π* and π̃, {args.rra_iterations} for the RRA agents",
             "seconds": time.perf_counter() - began,
             "rows": rows,
         },

@@ -11,7 +11,14 @@ import pytest
 import torch
 
 from vdtn_marl.algos.jocc import JointOptimisation
-from vdtn_marl.config import AlgoConfig, ExperimentConfig, RRAConfig, RunConfig, ScenarioConfig
+from vdtn_marl.config import (
+    AlgoConfig,
+    ControlConfig,
+    ExperimentConfig,
+    RRAConfig,
+    RunConfig,
+    ScenarioConfig,
+)
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 
@@ -43,6 +50,7 @@ def checkpoint(tmp_path_factory) -> Path:
         scenario=ScenarioConfig(episode_intervals=20, traces="synthetic"),
         algo=TINY_ALGO,
         experiment=TINY_EXPERIMENT,
+        control=ControlConfig(warm_start="none"),
         progress=False,
     )
     JointOptimisation(replace(cfg, seed=3), run_dir).run()
@@ -224,6 +232,19 @@ def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, t
     assert result["td_credit"]["mean"] == pytest.approx(
         result["one_step_credit"]["mean"], abs=0.05 + 0.2 * abs(result["td_credit"]["mean"])
     )
+    # the credit entry: with one interval of horizon Δξ is the td credit alone
+    credit = result["credit"]
+    assert credit["full_value"]["mean"] == pytest.approx(result["td_credit"]["mean"])
+    assert credit["full_value"]["n"] == result["cams"]
+    assert len(credit["delta_xi_mean_by_j"]) == 1
+    assert 1 <= credit["transmitting_subframes"]["mean"] <= 49  # delivered by subframe T−2
+    assert [row["name"] for row in credit["settings"]] == [
+        "subframe γ=0.99 λ=0.95", "subframe γ=0.99 λ=1", "interval γ=0.99 λ=0.95",
+        "interval γ=0.99 λ=1",
+    ]  # fmt: skip
+    for row in credit["settings"]:
+        assert row["credit"]["mean"] == pytest.approx(row["credit_from_j0"]["mean"])
+        assert row["credit"]["n"] == result["cams"]
     for bad, message in (
         (["--starts", "19", "--horizon", "5"], "must lie in"),
         (["--rra", "best"], "is not one of"),
@@ -243,3 +264,48 @@ def test_delivery_persistence_counts_consecutive_pairs_of_running_scenarios():
     assert result["in_time"] == pytest.approx(3 / 5)
     assert result["after_in_time"] == pytest.approx(1 / 3)  # in→in once, in→out twice
     assert result["after_miss"] == pytest.approx(1.0)  # out→in once
+
+
+def test_cam_credit_gae_weights_per_subframe_and_per_interval():
+    script = _load("cam_value")
+    subframe, interval = script.parse_credits("subframe:0.99:0.95,interval:0.99:0.95")
+    per_subframe = script.gae_weights(subframe, 50, 3)  # [T, H]
+    per_interval = script.gae_weights(interval, 50, 3)
+    assert per_subframe.shape == per_interval.shape == (50, 3)
+    # ξ of interval k is paid at t = T−1: 49 subframes after the interval's first action
+    assert float(per_subframe[0, 0]) == pytest.approx((0.99 * 0.95) ** 49)
+    assert float(per_subframe[0, 0]) == pytest.approx(0.0495, abs=5e-5)
+    assert float(per_subframe[49, 0]) == 1.0
+    assert float(per_subframe[49, 1]) == pytest.approx((0.99 * 0.95) ** 50)
+    assert float(per_interval[0, 0]) == pytest.approx((0.99 * 0.95) ** (49 / 50))
+    assert float(per_interval[49, 1]) == pytest.approx(0.99 * 0.95)  # γλ per interval
+    assert float(per_interval[0, 2]) == pytest.approx((0.99 * 0.95) ** (2 + 49 / 50))
+    assert interval.per_subframe(50) == pytest.approx((0.99**0.02, 0.95**0.02))
+    # a Δξ only at j = 0: the credit is the mean over the transmitting subframes of w(t, 0)·Δξ
+    transmitting = torch.zeros(2, 50, dtype=torch.bool)
+    transmitting[0, :5] = True
+    transmitting[1, :30] = True
+    delta_xi = torch.tensor([[0.2, 0.0, 0.0], [-0.1, 0.0, 0.0]], dtype=torch.float64)
+    for weights in (per_subframe, per_interval):
+        credit = script.credit_to_carriers(weights, transmitting, delta_xi)
+        expected = [0.2 * float(weights[:5, 0].mean()), -0.1 * float(weights[:30, 0].mean())]
+        assert credit.tolist() == pytest.approx(expected)
+    later = torch.tensor([[0.0, 1.0, 0.0]], dtype=torch.float64)
+    only_first = torch.zeros(1, 50, dtype=torch.bool)
+    only_first[0, 0] = True  # sent in subframe 0: the ξ of interval k+1 is 99 subframes away
+    assert float(script.credit_to_carriers(per_subframe, only_first, later)[0]) == pytest.approx(
+        (0.99 * 0.95) ** 99
+    )
+    full = script.discounted_sum(torch.ones(1, 3, dtype=torch.float64), 0.99)
+    assert float(full[0]) == pytest.approx(1 + 0.99 + 0.99**2)
+    share = script.ratio_of_means(torch.tensor([1.0, 2.0, 3.0]), torch.tensor([2.0, 4.0, 6.0]))
+    assert share["ratio"] == pytest.approx(0.5) and share["n"] == 3
+    assert share["low"] == pytest.approx(0.5) and share["high"] == pytest.approx(0.5)
+    summary = script.credit_summary(delta_xi, transmitting, [subframe, interval], 0.99, 50)
+    assert summary["full_value_share_j0"]["ratio"] == pytest.approx(1.0)
+    assert summary["full_value_share_later"]["ratio"] == pytest.approx(0.0, abs=1e-12)
+    for row in summary["settings"]:
+        assert row["credit"]["mean"] == pytest.approx(row["credit_from_j0"]["mean"])
+    for bad in ("minute:0.99:0.95", "subframe:0.99", "interval:1.5:0.95", "subframe:x:1"):
+        with pytest.raises(SystemExit, match="SCALE:GAMMA:LAMBDA"):
+            script.parse_credits(bad)

@@ -140,5 +140,6 @@ def test_jocc_warm_start_imitates_the_causal_mpc_before_the_first_pi_star_stage(
     }  # fmt: skip
 
     calls.clear()
-    cold = JointOptimisation(replace(cfg, control=ControlConfig()), tmp_path / "cold", "control")
+    cold_control = ControlConfig(warm_start="none")
+    cold = JointOptimisation(replace(cfg, control=cold_control), tmp_path / "cold", "control")
     assert cold.run()["warm_start"] is None and calls == []

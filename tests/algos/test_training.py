@@ -13,6 +13,7 @@ from vdtn_marl.algos.networks import scalers
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.config import (
     AlgoConfig,
+    ControlConfig,
     ExperimentConfig,
     RRAConfig,
     RunConfig,
@@ -40,6 +41,7 @@ TINY_EXPERIMENT = ExperimentConfig(
 def tiny_config(**kw) -> RunConfig:
     base = RunConfig(
         scenario=ScenarioConfig(episode_intervals=40),
+        control=ControlConfig(warm_start="none"),  # the imitation has its own tests
         algo=TINY_ALGO,
         experiment=TINY_EXPERIMENT,
         progress=False,
@@ -334,10 +336,8 @@ def test_jocc_and_drra_rewards_differ_from_throughput_exactly_as_specified():
 
 
 def test_impaired_control_training_with_kalman_completion(tmp_path):
-    from vdtn_marl.config import ControlConfig
-
     cfg = tiny_config(
-        control=ControlConfig(completion="kalman"),
+        control=ControlConfig(completion="kalman", warm_start="none"),
         experiment=replace(TINY_EXPERIMENT, control_iterations=1),
     )
     summary = JointOptimisation(cfg, tmp_path, task="control_impaired").run()
@@ -351,8 +351,6 @@ def test_impaired_control_training_with_kalman_completion(tmp_path):
     [("oracle", None, 400), ("oracle", 60, 60), ("causal_mpc", None, 200), ("causal_mpc", 30, 30)],
 )
 def test_mpc_controls_take_their_solver_steps_from_the_config(tmp_path, name, steps, expected):
-    from vdtn_marl.config import ControlConfig
-
     cfg = tiny_config(control=ControlConfig(name=name, augmentation=False, mpc_iterations=steps))
     controller = JointOptimisation(cfg, tmp_path).control_policy()
     assert controller.iterations == expected

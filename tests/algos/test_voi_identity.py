@@ -3,6 +3,7 @@
 import pytest
 import torch
 
+from vdtn_marl.algos.baselines import make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
@@ -111,21 +112,22 @@ def test_bad_estimator_arguments_raise():
 def test_ivoi_is_split_by_cam_delivery_of_the_followers_own_link():
     """ξ_i := 1 when follower i's CAM (link i) missed its interval, else 0: the split must put
     every 0 under 'delivered' and every 1 under 'lost', scenario by scenario."""
-    # synthetic traces (10-30 m/s): under random RRA every scenario both delivers and loses
-    # CAMs; on the city cycle a stopped platoon can lose all of them (docs/model.md §4.2)
+    # synthetic traces (10-30 m/s) and round-robin RRA: every scenario both delivers and
+    # loses CAMs (random RRA delivers too few on the physical V2V channel, docs/model.md §4.2)
     params = TwinParams.from_overrides(episode_intervals=10, traces="synthetic")
+    round_robin = make_rra_baseline("round_robin", params, 5)
     t = params.platoon.subframes_per_interval
 
     def lost_indicator(twin, record):
         return (record.cam_delay_subframes > t).float()
 
     result = evaluate_system(
-        params, CACCController(params.platoon), None, perfect=False, episodes=6, intervals=10,
-        seed=5, gamma=1.0, ivoi_estimator=lost_indicator,
+        params, CACCController(params.platoon), round_robin, perfect=False, episodes=6,
+        intervals=10, seed=5, gamma=1.0, ivoi_estimator=lost_indicator,
     )  # fmt: skip
     delivered, lost = result.ivoi_delivered, result.ivoi_lost
     assert delivered.shape == lost.shape == (6,)
-    # the random RRA policy loses some CAMs and delivers some in every scenario
+    # the round-robin RRA policy loses some CAMs and delivers some in every scenario
     assert torch.isfinite(delivered).all() and torch.isfinite(lost).all()
     torch.testing.assert_close(delivered, torch.zeros(6, dtype=torch.float64))
     torch.testing.assert_close(lost, torch.ones(6, dtype=torch.float64))
