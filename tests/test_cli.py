@@ -120,7 +120,7 @@ def _only_entry(path: Path) -> Path:
 def test_envs_lists_registry_with_agents_clocks_descriptions(tmp_path):
     result = run_cli("envs", cwd=tmp_path)
     assert result.returncode == 0, result.stderr
-    for env_id in ("vdtn/platoon-control-v0", "vdtn/v2x-rra-v0", "vdtn/vdtn-joint-v0"):
+    for env_id in ("vdtn/platoon-control-v0", "vdtn/v2x-rra-v1", "vdtn/vdtn-joint-v1"):
         assert env_id in result.stdout
     assert "vehicle=50ms, rra=1ms" in result.stdout
     assert "description" in result.stdout.splitlines()[0]
@@ -198,6 +198,10 @@ BAD_CONFIGS = [
     (["scenario.num_vehicles=1"], "scenario.num_vehicles=1"),
     (["scenario.subchannel_bandwidth_hz=0"], "scenario.subchannel_bandwidth_hz"),
     (["scenario=platoon99"], "scenario=platoon99"),
+    (
+        ["scenario=platoon4_noise90", "scenario.model.noise_power_override_dbm=5"],
+        "noise_power_override_dbm=5",
+    ),
     (["seed=abc"], "seed=abc"),
     (["rra.kappa1=high"], "rra.kappa1=high"),
     (["algo.num_envs=2.5"], "algo.num_envs=2.5"),
@@ -319,6 +323,7 @@ def test_group_options_as_documented():
         "platoon8",
         "platoon16",
         "platoon4_1mhz",
+        "platoon4_noise90",
     }
     assert set(cli_help.group_options("algo")) == {"mappo", "ippo"}
     assert set(cli_help.group_options("rra")) == {
@@ -333,7 +338,8 @@ def test_group_options_as_documented():
 def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
     from hydra import compose, initialize_config_module
 
-    from vdtn_marl.config import register_configs
+    from vdtn_marl.config import ScenarioConfig, register_configs
+    from vdtn_marl.sim.params import TwinParams
 
     register_configs()
     with initialize_config_module(config_module="vdtn_marl.conf", version_base="1.3"):
@@ -343,6 +349,11 @@ def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
         assert base.subchannel_bandwidth_hz == 180e3
         assert wide.subchannel_bandwidth_hz == 1e6 and wide.num_vehicles == 4
         assert compose("config", ["scenario=platoon16"]).scenario.num_vehicles == 16
+        noisy = compose("config", ["scenario=platoon4_noise90"]).scenario
+        assert noisy.subchannel_bandwidth_hz == 180e3 and noisy.num_vehicles == 4
+        assert dict(noisy.model) == {"noise_power_override_dbm": -90.0}
+        kwargs = ScenarioConfig(model=dict(noisy.model)).model_kwargs()
+        assert TwinParams.from_overrides(**kwargs).radio.noise_power_dbm == -90.0
         assert compose("config", ["rra=throughput"]).rra.kappa1 == 1.0
 
 

@@ -12,6 +12,7 @@ from vdtn_marl.sim.platoon import IntervalIntegrator, PlatoonState, spacing_erro
 from vdtn_marl.sim.twin import DigitalTwin
 
 RADIO = RadioParams()
+LIANG = RadioParams(v2v_pathloss_form="liang")
 
 
 def test_v2i_pathloss_at_known_distances():
@@ -21,23 +22,94 @@ def test_v2i_pathloss_at_known_distances():
     assert torch.allclose(channel.v2i_pathloss_db(d), expected, atol=1e-3)
 
 
-def test_v2v_pathloss_below_and_beyond_breakpoint():
-    # f = 2 GHz, h = 1.5 m: d_bp = 4·0.5·0.5·2e9/3e8 = 6.667 m
-    d = torch.tensor([1.0, 5.0, 100.0])
+def _free_space_db(d_m: float, f_ghz: float = 2.0) -> float:
+    return 20 * math.log10(d_m) + 20 * math.log10(f_ghz) + 32.45
+
+
+def test_default_v2v_pathloss_is_winner_b1_with_a_free_space_floor():
+    # f = 2 GHz, h' = h − 1 = 0.5 m: d_bp = 4·0.5·0.5·2e9/3e8 = 6.667 m
+    assert RADIO.v2v_pathloss_form == "winner_b1"
+    d = torch.tensor([1.0, 5.0, 7.0, 10.0, 100.0])
+    expected = torch.tensor(
+        [
+            _free_space_db(3.0),  # clamped to 3 m; B1 43.871 is below free space 48.013
+            _free_space_db(5.0),  # 52.450 (B1 48.907)
+            _free_space_db(7.0),  # 55.373 (B1 52.595)
+            40 * 1 + 9.45 - 34.6 * math.log10(0.5) + 2.7 * math.log10(0.4),  # 58.791 ≥ 58.471
+            40 * 2 + 9.45 - 34.6 * math.log10(0.5) + 2.7 * math.log10(0.4),  # 98.791
+        ]
+    )
+    assert torch.allclose(channel.v2v_pathloss_db(d, RADIO), expected, atol=1e-3)
+    assert _free_space_db(7.0) == pytest.approx(55.4, abs=0.05)
+    assert _free_space_db(10.0) == pytest.approx(58.5, abs=0.05)
+
+
+def test_liang_v2v_pathloss_below_and_beyond_breakpoint_is_unchanged():
+    d = torch.tensor([1.0, 5.0, 7.0, 10.0, 100.0])
     expected = torch.tensor(
         [
             22.7 * math.log10(3.0) + 41 + 20 * math.log10(0.4),  # clamped to 3 m: 43.871
             22.7 * math.log10(5.0) + 41 + 20 * math.log10(0.4),  # 48.907
+            40 * math.log10(7.0) + 9.45 - 34.6 * math.log10(1.5) + 2.7 * math.log10(0.4),
+            40 * 1 + 9.45 - 34.6 * math.log10(1.5) + 2.7 * math.log10(0.4),  # 42.283
             40 * 2 + 9.45 - 34.6 * math.log10(1.5) + 2.7 * math.log10(0.4),  # 82.283
         ]
     )
-    assert torch.allclose(channel.v2v_pathloss_db(d, RADIO), expected, atol=1e-3)
+    assert torch.allclose(channel.v2v_pathloss_db(d, LIANG), expected, atol=1e-3)
     assert expected[1] == pytest.approx(48.907, abs=1e-3)
+    assert expected[2] == pytest.approx(36.1, abs=0.05)  # 19.3 dB below free space
+    assert expected[3] == pytest.approx(42.3, abs=0.05)
+
+
+def test_winner_b1_is_never_below_free_space_and_equals_it_where_b1_is_lower():
+    d = torch.linspace(1.0, 500.0, 49_901)  # 1–500 m in 1 cm steps
+    pathloss = channel.v2v_pathloss_db(d, RADIO)
+    free_space = 20 * torch.log10(d) + 20 * math.log10(2.0) + 32.45
+    assert (pathloss >= free_space - 1e-4).all()
+    # B1's far branch, 40·log10(d) + 18.791, crosses free space, 20·log10(d) + 38.471, at
+    # d = 10^(19.680/20) = 9.67 m: from 3 m up to there the floor decides
+    crossing_m = 10 ** ((38.471 - 18.791) / 20)
+    floor = (d >= 3.0) & (d < crossing_m - 0.01)
+    torch.testing.assert_close(pathloss[floor], free_space[floor], rtol=0, atol=1e-4)
+    b1_far = 40 * torch.log10(d) + 9.45 - 34.6 * math.log10(0.5) + 2.7 * math.log10(0.4)
+    above = d > crossing_m + 0.01
+    torch.testing.assert_close(pathloss[above], b1_far[above], rtol=0, atol=1e-4)
+    at = channel.v2v_pathloss_db(torch.tensor([7.0, 10.0]), RADIO)
+    assert float(at[0]) == pytest.approx(55.4, abs=0.1)  # free space (B1: 52.6)
+    assert float(at[1]) == pytest.approx(58.8, abs=0.1)  # B1, 0.3 dB above free space 58.5
+
+
+def test_v2v_pathloss_numpy_and_torch_agree_in_both_forms():
+    d = np.linspace(0.0, 600.0, 60_001, dtype=np.float32)
+    for radio in (RADIO, LIANG):
+        got = channel.v2v_pathloss_db(d, radio)
+        assert isinstance(got, np.ndarray) and got.dtype == np.float32
+        want = channel.v2v_pathloss_db(torch.from_numpy(d), radio).numpy()
+        np.testing.assert_array_equal(got, want, err_msg=radio.v2v_pathloss_form)
 
 
 def test_noise_power_for_180_khz():
     assert RADIO.noise_power_dbm == pytest.approx(-121.447, abs=1e-3)
     assert RadioParams(subchannel_bandwidth_hz=1e6).noise_power_dbm == pytest.approx(-114.0)
+
+
+def test_noise_power_override_reaches_the_kernel():
+    """``noise_power_override_dbm`` replaces the thermal noise per sub-channel wherever the
+    twin reads it (the −90 dBm sensitivity scenario, docs/model.md §4.4)."""
+    params = TwinParams.from_overrides(noise_power_override_dbm=-90.0)
+    assert params.radio.noise_power_dbm == -90.0
+    assert RADIO.noise_power_override_dbm is None
+    for backend in ("torch", "numpy"):
+        twin = DigitalTwin(params, seed=0, backend=backend)
+        assert twin._const_torch.noise_mw == pytest.approx(1e-9, rel=1e-12)
+        thermal = DigitalTwin(seed=0, backend=backend)._const_torch.noise_mw
+        assert thermal == pytest.approx(10 ** (-12.1447), rel=1e-4)
+
+
+@pytest.mark.parametrize("value", [10.0, -250.0, float("nan"), "loud", True])
+def test_bad_noise_power_override_is_rejected(value):
+    with pytest.raises(ConfigError, match=r"^noise_power_override_dbm=.*\[-200(\.0)?, 0(\.0)?\]"):
+        TwinParams.from_overrides(noise_power_override_dbm=value)
 
 
 def test_serving_bs_is_nearest():
@@ -331,18 +403,24 @@ def test_v2v_pathloss_jumps_down_at_the_breakpoint_in_liangs_form():
     the loss falls by 16.5 dB at d_bp = 6.67 m (docs/model.md §4.2): a platoon's V2V links,
     L + r + h·v long, are that much weaker below about 6.7 m/s."""
     d_bp = 4 * 0.5**2 * 2e9 / 3e8  # c = 3·10⁸ m/s, as in Liang et al.'s simulator
-    near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), RADIO)
+    near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), LIANG)
     assert float(near - far) == pytest.approx(16.50, abs=0.02)
 
 
 def test_winner_b1_form_is_continuous_at_the_breakpoint():
     radio = TwinParams.from_overrides(v2v_pathloss_form="winner_b1").radio
+    assert radio == RADIO
     d_bp = 4 * 0.5**2 * 2e9 / 3e8
     near, far = channel.v2v_pathloss_db(torch.tensor([d_bp - 1e-3, d_bp + 1e-3]), radio)
     assert float(far - near) == pytest.approx(0.0, abs=0.02)
-    # below the breakpoint both forms agree; beyond it WINNER+ B1 is 16.5 dB lossier
-    d = torch.tensor([5.0, 100.0])
-    gap = channel.v2v_pathloss_db(d, radio) - channel.v2v_pathloss_db(d, RADIO)
-    assert torch.allclose(gap, torch.tensor([0.0, 34.6 * math.log10(3.0)]), atol=1e-3)
+    assert float(near) == pytest.approx(_free_space_db(d_bp - 1e-3), abs=1e-3)  # floor, 54.95 dB
+    # without the floor B1 itself is continuous there too (51.74 / 51.75 dB)
+    b1_near = 22.7 * math.log10(d_bp) + 41 + 20 * math.log10(0.4)
+    b1_far = 40 * math.log10(d_bp) + 9.45 - 34.6 * math.log10(0.5) + 2.7 * math.log10(0.4)
+    assert b1_near == pytest.approx(b1_far, abs=0.01)
+    # beyond the floor's reach WINNER+ B1 is 34.6·log10(3) = 16.5 dB lossier than Liang's form
+    d = torch.tensor([20.0, 100.0])
+    gap = channel.v2v_pathloss_db(d, radio) - channel.v2v_pathloss_db(d, LIANG)
+    assert torch.allclose(gap, torch.full((2,), 34.6 * math.log10(3.0)), atol=1e-3)
     with pytest.raises(ConfigError, match="v2v_pathloss_form='winner' must be one of 'liang'"):
         TwinParams.from_overrides(v2v_pathloss_form="winner")

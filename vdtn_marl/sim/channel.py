@@ -27,23 +27,34 @@ def v2i_pathloss_db(distance_3d_m: torch.Tensor) -> torch.Tensor:
 
 
 def v2v_pathloss_db(distance_m: torch.Tensor, radio: RadioParams) -> torch.Tensor:
-    """WINNER+ B1 line-of-sight path loss in dB, in the form of Liang et al.'s simulator.
+    """WINNER+ B1 line-of-sight path loss in dB (docs/model.md §4.2).
 
-    PL = 22.7·log10(d) + 41 + 20·log10(f/5 GHz) for 3 m < d < d_bp, with d clamped to 3 m below;
-    PL = 40·log10(d) + 9.45 − 17.3·log10(h_tx) − 17.3·log10(h_rx) + 2.7·log10(f/5 GHz) beyond
-    the breakpoint d_bp = 4·(h_tx − 1)·(h_rx − 1)·f/c (both antennas at ``vehicle_height_m``).
-    With ``radio.v2v_pathloss_form == "winner_b1"`` the beyond-breakpoint heights are the
-    effective ones, h − 1, as in WINNER+ B1 itself, and the loss is continuous at d_bp.
+    PL_B1 = 22.7·log10(d) + 41 + 20·log10(f/5 GHz) for 3 m < d < d_bp, with d clamped to 3 m
+    below; PL_B1 = 40·log10(d) + 9.45 − 17.3·log10(h'_tx) − 17.3·log10(h'_rx) + 2.7·log10(f/5 GHz)
+    beyond the breakpoint d_bp = 4·h'_tx·h'_rx·f/c, with the effective antenna heights
+    h' = h − 1 m (both antennas at ``vehicle_height_m``).
+
+    ``radio.v2v_pathloss_form == "winner_b1"`` (the default): PL = max(PL_B1, FSPL) with the
+    free-space loss FSPL = 20·log10(d) + 20·log10(f/GHz) + 32.45 (the highway V2V LOS model of
+    3GPP TR 36.885); at 2 GHz the floor decides from 3 m up to about 9.7 m, e.g. 55.4 dB at 7 m,
+    and the loss is continuous at d_bp. ``"liang"``: the form of Liang et al.'s simulator, the
+    real heights h in the far branch and no floor; the loss drops 16.5 dB at d_bp and lies
+    10–20 dB below free space at 7–20 m (36.1 dB at 7 m).
     """
     f_ghz = radio.carrier_ghz
     h = radio.vehicle_height_m
+    liang = radio.v2v_pathloss_form == "liang"
     breakpoint_m = 4.0 * (h - 1.0) ** 2 * f_ghz * 1e9 / SPEED_OF_LIGHT_MPS
-    far_height_m = h if radio.v2v_pathloss_form == "liang" else h - 1.0
+    far_height_m = h if liang else h - 1.0
     d = clamp(distance_m, 3.0)
     log_d = log10(d)
     near = 22.7 * log_d + 41.0 + 20.0 * math.log10(f_ghz / 5.0)
     far = 40.0 * log_d + 9.45 - 2 * 17.3 * math.log10(far_height_m) + 2.7 * math.log10(f_ghz / 5.0)
-    return xp(d).where(d < breakpoint_m, near, far)
+    pathloss = xp(d).where(d < breakpoint_m, near, far)
+    if liang:
+        return pathloss
+    free_space = 20.0 * log_d + (20.0 * math.log10(f_ghz) + 32.45)
+    return xp(d).maximum(pathloss, free_space)
 
 
 def serving_bs_x_m(

@@ -136,10 +136,15 @@ class RadioParams:
     v2i_decorrelation_m: float = 50.0
     v2v_shadow_std_db: float = 3.0
     v2v_decorrelation_m: float = 10.0
-    # V2V path loss beyond the breakpoint (docs/model.md §4.2): "liang" (Liang et al.'s
-    # simulator, antenna heights h: 16.5 dB lower just beyond the breakpoint than just below)
-    # or "winner_b1" (WINNER+ B1's effective heights h − 1: continuous at the breakpoint)
-    v2v_pathloss_form: str = "liang"
+    # V2V path loss (docs/model.md §4.2): "winner_b1" (WINNER+ B1 LOS with the effective
+    # antenna heights h − 1 and a free-space floor, as TR 36.885's highway V2V model;
+    # continuous at the breakpoint) or "liang" (Liang et al.'s simulator, the v0 default: real
+    # heights h beyond the breakpoint and no floor, 16.5 dB lower just beyond the breakpoint
+    # than just below and 10–20 dB below free space at 7–20 m)
+    v2v_pathloss_form: str = "winner_b1"
+    # Sub-channel noise power in dBm that replaces −174 dBm/Hz + 10·log10(B) when set (a
+    # sensitivity knob, e.g. the −90 dBm row of the Seed's source; docs/model.md §4.4)
+    noise_power_override_dbm: float | None = None
 
     @property
     def num_power_levels(self) -> int:
@@ -153,7 +158,10 @@ class RadioParams:
 
     @property
     def noise_power_dbm(self) -> float:
-        """Thermal noise in one sub-channel, −174 dBm/Hz + 10·log10(B) (docs/model.md §4.4)."""
+        """Noise power in one sub-channel: ``noise_power_override_dbm`` when set, else the
+        thermal noise −174 dBm/Hz + 10·log10(B) (docs/model.md §4.4)."""
+        if self.noise_power_override_dbm is not None:
+            return float(self.noise_power_override_dbm)
         return self.noise_density_dbm_hz + 10.0 * math.log10(self.subchannel_bandwidth_hz)
 
     def validate(self) -> None:
@@ -179,6 +187,14 @@ class RadioParams:
             _check_range(name, getattr(self, name), 0.0, 30.0)
         for name in ("v2i_decorrelation_m", "v2v_decorrelation_m"):
             _check_range(name, getattr(self, name), 0.0, 1e5, low_open=True)
+        override = self.noise_power_override_dbm
+        if override is not None:
+            if not isinstance(override, numbers.Real) or isinstance(override, bool):
+                raise ConfigError(
+                    f"noise_power_override_dbm={override!r} must be a number in [-200, 0] "
+                    "(dBm per sub-channel) or null"
+                )
+            _check_range("noise_power_override_dbm", override, -200.0, 0.0)
         if self.v2v_pathloss_form not in V2V_PATHLOSS_FORMS:
             raise ConfigError(
                 f"v2v_pathloss_form={self.v2v_pathloss_form!r} must be one of "
