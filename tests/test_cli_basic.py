@@ -8,14 +8,11 @@ import types
 
 import pytest
 
+import vdtn_marl
 from vdtn_marl import cli
 
-BUILTIN_IDS = (
-    "vdtn/platoon-control-v0",
-    "vdtn/platoon-control-impaired-v0",
-    "vdtn/v2x-rra-v0",
-    "vdtn/vdtn-joint-v0",
-)
+BUILTIN_IDS = tuple(env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/"))
+"""Every built-in id, from the registry (tests/test_registry.py pins the list itself)."""
 
 
 def test_envs_prints_table_with_builtin_ids(capsys):
@@ -33,8 +30,8 @@ def test_envs_json(capsys):
     assert cli.main(["envs", "--json"]) == 0
     rows = {row["id"]: row for row in json.loads(capsys.readouterr().out)}
     assert set(BUILTIN_IDS) <= set(rows)
-    assert rows["vdtn/vdtn-joint-v0"]["clocks"] == {"vehicle": 50, "rra": 1}
-    assert rows["vdtn/platoon-control-impaired-v0"]["kwargs"] == {"impaired": True}
+    assert rows["vdtn/vdtn-joint-v1"]["clocks"] == {"vehicle": 50, "rra": 1}
+    assert rows["vdtn/platoon-control-impaired-v1"]["kwargs"] == {"impaired": True}
 
 
 def test_rollout_forwards_all_arguments(monkeypatch):
@@ -42,8 +39,8 @@ def test_rollout_forwards_all_arguments(monkeypatch):
     fake = types.ModuleType("vdtn_marl.rollout")
     fake.main = lambda argv: seen.append(list(argv)) or 0
     monkeypatch.setitem(sys.modules, "vdtn_marl.rollout", fake)
-    assert cli.main(["rollout", "--env", "vdtn/v2x-rra-v0", "--help"]) == 0
-    assert seen == [["--env", "vdtn/v2x-rra-v0", "--help"]]
+    assert cli.main(["rollout", "--env", "vdtn/v2x-rra-v1", "--help"]) == 0
+    assert seen == [["--env", "vdtn/v2x-rra-v1", "--help"]]
 
 
 @pytest.mark.parametrize("argv", [["no-such-command"], []])

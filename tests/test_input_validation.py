@@ -129,7 +129,7 @@ def test_task_rra_needs_a_learned_rra_method():
 )
 def test_make_names_the_bad_keyword(kwargs, message):
     with pytest.raises(ConfigError) as info:
-        vdtn_marl.make("vdtn/vdtn-joint-v0", **kwargs)
+        vdtn_marl.make("vdtn/vdtn-joint-v1", **kwargs)
     assert message in str(info.value)
 
 

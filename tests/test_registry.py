@@ -26,6 +26,7 @@ class DummyEnv:
 def isolated_registry(monkeypatch):
     """Each test sees the built-ins plus what it registers; nothing leaks into other tests."""
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+    monkeypatch.setattr(registry, "_SUPERSEDED", dict(registry._SUPERSEDED))
     monkeypatch.setattr(registry, "_PLUGINS_LOADED", registry._PLUGINS_LOADED)
     yield
 
@@ -155,18 +156,64 @@ def test_bad_clock_period_raises():
 
 def test_builtin_specs_registered_with_metadata():
     """Metadata only: the classes behind the built-ins are tested with the environments."""
-    ids = vdtn_marl.list_envs()
-    for env_id in (
-        "vdtn/platoon-control-v0",
-        "vdtn/platoon-control-impaired-v0",
-        "vdtn/v2x-rra-v0",
-        "vdtn/vdtn-joint-v0",
-    ):
-        assert env_id in ids
+    builtin = {env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/")}
+    assert builtin == {
+        "vdtn/platoon-control-v0",  # no radio: its dynamics did not change with the channel
+        "vdtn/platoon-control-impaired-v1",
+        "vdtn/v2x-rra-v1",
+        "vdtn/vdtn-joint-v1",
+    }
     assert vdtn_marl.spec("vdtn/platoon-control-v0").kwargs == {"impaired": False}
-    assert vdtn_marl.spec("vdtn/platoon-control-impaired-v0").kwargs == {"impaired": True}
-    assert vdtn_marl.spec("vdtn/v2x-rra-v0").clocks == {"rra": 1}
-    assert vdtn_marl.spec("vdtn/vdtn-joint-v0").clocks == {"vehicle": 50, "rra": 1}
+    assert vdtn_marl.spec("vdtn/platoon-control-impaired-v1").kwargs == {"impaired": True}
+    assert vdtn_marl.spec("vdtn/v2x-rra-v1").clocks == {"rra": 1}
+    assert vdtn_marl.spec("vdtn/vdtn-joint-v1").clocks == {"vehicle": 50, "rra": 1}
+
+
+def _superseded_builtins() -> dict[str, str]:
+    """{old id: new id} of every built-in id that a newer version supersedes."""
+    return {old: entry.new_id for old, entry in registry._SUPERSEDED.items()}
+
+
+def test_every_bumped_builtin_supersedes_its_v0():
+    superseded = _superseded_builtins()
+    assert set(superseded.values()) == set(registry.VERSION_CHANGES)
+    for env_id in vdtn_marl.list_envs():
+        name, version = env_id.rsplit("-v", 1)
+        if env_id.startswith("vdtn/") and int(version) > 0:
+            assert superseded[f"{name}-v0"] == env_id
+    assert "vdtn/platoon-control-v0" not in superseded  # still current
+    assert not set(superseded) & set(vdtn_marl.list_envs())  # superseded ids are not listed
+
+
+def test_superseded_id_raises_one_clear_deprecated_error():
+    superseded = _superseded_builtins()
+    assert superseded
+    for old, new in superseded.items():
+        for lookup in (vdtn_marl.make, vdtn_marl.spec):
+            with pytest.raises(vdtn_marl.DeprecatedEnvError) as info:
+                lookup(old)
+            msg = str(info.value)
+            assert msg.startswith(f"{old} is superseded by {new} (v1: "), msg
+            assert "free-space floor" in msg and "v2v_pathloss_form='liang'" in msg
+            assert "\n" not in msg
+    assert issubclass(vdtn_marl.DeprecatedEnvError, vdtn_marl.UnknownEnvError)
+    with pytest.raises(vdtn_marl.UnknownEnvError) as info:  # a version that never existed
+        vdtn_marl.make("vdtn/v2x-rra-v7")
+    assert not isinstance(info.value, vdtn_marl.DeprecatedEnvError)
+    assert "did you mean 'vdtn/v2x-rra-v1'?" in str(info.value)
+
+
+def test_v0_channel_from_a_v1_id_as_the_error_says():
+    env = vdtn_marl.make("vdtn/v2x-rra-v1", seed=0, v2v_pathloss_form="liang")
+    assert env.twin.params.radio.v2v_pathloss_form == "liang"
+    assert vdtn_marl.make("vdtn/v2x-rra-v1", seed=0).twin.params.radio.v2v_pathloss_form == (
+        "winner_b1"
+    )
+
+
+def test_a_superseded_id_can_be_registered_again():
+    vdtn_marl.register("vdtn/v2x-rra-v0", DummyEnv, num_vehicles=3)
+    assert vdtn_marl.make("vdtn/v2x-rra-v0").num_vehicles == 3
 
 
 # --- third-party discovery through real entry points ------------------------------------------
@@ -233,7 +280,7 @@ def test_plugin_entry_point_is_discovered_once(plugin_env):
         warnings.simplefilter("error", vdtn_marl.PluginLoadWarning)
         ids = vdtn_marl.list_envs()
         assert env_id in ids
-        assert "vdtn/vdtn-joint-v0" in ids  # built-ins are still there
+        assert "vdtn/vdtn-joint-v1" in ids  # built-ins are still there
         assert vdtn_marl.spec(env_id).description == "an env from a plugin"
         env = vdtn_marl.make(env_id, size=5)
         assert type(env).__name__ == "FakeEnv" and env.size == 5

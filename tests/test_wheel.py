@@ -111,7 +111,7 @@ def test_installed_package_comes_from_the_wheel(installed):
 def test_installed_cli_lists_envs(installed):
     result = _run([installed["bin"] / "vdtn-marl", "envs"], installed["work"], installed["env"])
     assert result.returncode == 0, result.stderr
-    assert "vdtn/vdtn-joint-v0" in result.stdout
+    assert "vdtn/vdtn-joint-v1" in result.stdout
 
 
 def test_installed_cli_composes_configs_from_the_wheel(installed):

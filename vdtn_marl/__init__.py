@@ -3,13 +3,14 @@ resource allocation in a Vehicular Digital Twin Network.
 
 >>> import vdtn_marl
 >>> vdtn_marl.list_envs()  # doctest: +SKIP
-['vdtn/platoon-control-impaired-v0', 'vdtn/platoon-control-v0', 'vdtn/v2x-rra-v0', ...]
->>> env = vdtn_marl.make("vdtn/vdtn-joint-v0")  # doctest: +SKIP
+['vdtn/platoon-control-impaired-v1', 'vdtn/platoon-control-v0', 'vdtn/v2x-rra-v1', ...]
+>>> env = vdtn_marl.make("vdtn/vdtn-joint-v1")  # doctest: +SKIP
 """
 
 from importlib import metadata as _metadata
 
 from vdtn_marl.registry import (
+    DeprecatedEnvError,
     EnvSpec,
     PluginLoadWarning,
     UnknownEnvError,
@@ -25,6 +26,7 @@ except _metadata.PackageNotFoundError:  # running from a source tree that is not
     __version__ = "0.1.0"
 
 __all__ = [
+    "DeprecatedEnvError",
     "EnvSpec",
     "PluginLoadWarning",
     "UnknownEnvError",

@@ -8,6 +8,12 @@ Third-party packages add environments through the ``vdtn_marl.envs`` entry-point
 entry point in that group is a zero-argument callable that calls :func:`register`. The group is
 loaded once, on the first call of :func:`make`, :func:`list_envs` or :func:`spec`. A plugin that
 fails emits a :class:`PluginLoadWarning` and is skipped.
+
+Versions follow Gymnasium's rule: an environment whose default dynamics change gets a new
+``-vN``, and :func:`make` (and :func:`spec`) of the id it supersedes raises a
+:class:`DeprecatedEnvError` that names the new id, what changed and how to get the old
+behaviour back. Superseded ids are not listed by :func:`list_envs`. Version history of the
+built-in ids: docs/model.md ("Version history").
 """
 
 from __future__ import annotations
@@ -24,6 +30,7 @@ from typing import Any
 
 __all__ = [
     "ENTRY_POINT_GROUP",
+    "DeprecatedEnvError",
     "EnvSpec",
     "PluginLoadWarning",
     "UnknownEnvError",
@@ -44,6 +51,26 @@ class UnknownEnvError(KeyError):
 
     def __str__(self) -> str:  # KeyError would repr() the message
         return str(self.args[0]) if self.args else ""
+
+
+class DeprecatedEnvError(UnknownEnvError):
+    """Raised for an id that a newer version supersedes (Gymnasium's ``DeprecatedEnv``).
+
+    A subclass of :class:`UnknownEnvError`, so code that handles unknown ids handles it too;
+    the message names the new id, what changed, and how to get the old behaviour.
+    """
+
+
+@dataclass(frozen=True)
+class _Superseded:
+    new_id: str
+    changes: tuple[str, ...]  # what the new version changes, one entry per change
+    hint: str  # how to get the old behaviour from the new id
+
+    def message(self, old_id: str) -> str:
+        version = self.new_id.rsplit("-", 1)[1]
+        msg = f"{old_id} is superseded by {self.new_id} ({version}: {'; '.join(self.changes)})"
+        return msg + (f"; {self.hint}" if self.hint else "")
 
 
 class PluginLoadWarning(RuntimeWarning):
@@ -99,6 +126,7 @@ class EnvSpec:
 
 
 _REGISTRY: dict[str, EnvSpec] = {}
+_SUPERSEDED: dict[str, _Superseded] = {}
 _PLUGINS_LOADED = False
 _PLUGIN_LOCK = threading.RLock()
 
@@ -165,11 +193,17 @@ def make(env_id: str, **kwargs: Any) -> Any:
 
 
 def spec(env_id: str) -> EnvSpec:
-    """Return the :class:`EnvSpec` of ``env_id`` (raises :class:`UnknownEnvError`)."""
+    """Return the :class:`EnvSpec` of ``env_id``.
+
+    Raises :class:`DeprecatedEnvError` for an id that a newer version supersedes and
+    :class:`UnknownEnvError` for any other id that is not registered.
+    """
     _load_plugins()
     try:
         return _REGISTRY[env_id]
     except KeyError:
+        if env_id in _SUPERSEDED:
+            raise DeprecatedEnvError(_SUPERSEDED[env_id].message(env_id)) from None
         raise UnknownEnvError(_unknown_message(env_id)) from None
 
 
@@ -177,6 +211,14 @@ def list_envs() -> list[str]:
     """All registered ids, sorted."""
     _load_plugins()
     return sorted(_REGISTRY)
+
+
+def _supersede(old_id: str, new_id: str, changes: list[str] | tuple[str, ...], hint: str) -> None:
+    """Mark ``old_id`` as superseded by the registered ``new_id``: :func:`make` of it raises
+    :class:`DeprecatedEnvError` (unless someone registers ``old_id`` again)."""
+    if new_id not in _REGISTRY:
+        raise ValueError(f"{new_id!r}, which supersedes {old_id!r}, is not registered")
+    _SUPERSEDED[old_id] = _Superseded(new_id, tuple(changes), hint)
 
 
 def _unknown_message(env_id: object) -> str:
@@ -250,7 +292,7 @@ register(
     impaired=False,
 )
 register(
-    "vdtn/platoon-control-impaired-v0",
+    "vdtn/platoon-control-impaired-v1",
     "vdtn_marl.envs.control:PlatoonControlEnv",
     agents="vehicle_1..vehicle_{N-1} (followers)",
     clocks={"vehicle": 50},
@@ -264,7 +306,7 @@ register(
     impaired=True,
 )
 register(
-    "vdtn/v2x-rra-v0",
+    "vdtn/v2x-rra-v1",
     "vdtn_marl.envs.radio:V2XRRAEnv",
     agents="rra_1..rra_{N-1} (base-station RRA agent of each V2V link)",
     clocks={"rra": 1},
@@ -276,7 +318,7 @@ register(
     uses_traces=True,
 )
 register(
-    "vdtn/vdtn-joint-v0",
+    "vdtn/vdtn-joint-v1",
     "vdtn_marl.envs.two_timescale:TwoTimescaleEnv",
     agents=(
         "vehicle_1..vehicle_{N-1} (followers, every 50 ms) and "
@@ -290,3 +332,20 @@ register(
     data_source=TRACES_NOTE,
     uses_traces=True,
 )
+
+# --- superseded versions -------------------------------------------------------------------
+# What each version changed, one entry per change (docs/model.md, "Version history"); an id is
+# bumped when its default dynamics change. vdtn/platoon-control-v0 has no radio: still v0.
+V1_CHANNEL_CHANGE = (
+    "V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by "
+    "default, was Liang et al.'s form"
+)
+V0_CHANNEL_HINT = "for v0's channel pass v2v_pathloss_form='liang'"
+VERSION_CHANGES: dict[str, tuple[str, ...]] = {
+    "vdtn/platoon-control-impaired-v1": (V1_CHANNEL_CHANGE,),
+    "vdtn/v2x-rra-v1": (V1_CHANNEL_CHANGE,),
+    "vdtn/vdtn-joint-v1": (V1_CHANNEL_CHANGE,),
+}
+"""Changes of each built-in id against its previous version (what DeprecatedEnvError says)."""
+for _new_id, _changes in VERSION_CHANGES.items():
+    _supersede(_new_id.removesuffix("-v1") + "-v0", _new_id, _changes, V0_CHANNEL_HINT)

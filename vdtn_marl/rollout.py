@@ -1,4 +1,4 @@
-"""A short random-policy rollout of ``vdtn/vdtn-joint-v0`` with a results table.
+"""A short random-policy rollout of ``vdtn/vdtn-joint-v1`` with a results table.
 
     python -m vdtn_marl.rollout --intervals 40 --seed 0
 
@@ -22,7 +22,7 @@ from vdtn_marl.sim.params import ConfigError
 
 
 def run(intervals: int, seed: int, kappa1: float, device: str) -> dict[str, float]:
-    env = vdtn_marl.make("vdtn/vdtn-joint-v0", seed=seed, kappa1=kappa1, device=device)
+    env = vdtn_marl.make("vdtn/vdtn-joint-v1", seed=seed, kappa1=kappa1, device=device)
     _, infos = env.reset(seed=seed)
     for agent in env.possible_agents:
         env.action_space(agent).seed(seed)
@@ -99,7 +99,7 @@ def main(argv: list[str] | None = None) -> int:
     results = run(args.intervals, args.seed, args.kappa1, args.device)
     print_table(
         results,
-        f"vdtn/vdtn-joint-v0, random policies, {args.intervals} intervals, seed {args.seed}",
+        f"vdtn/vdtn-joint-v1, random policies, {args.intervals} intervals, seed {args.seed}",
     )
     return 0
 

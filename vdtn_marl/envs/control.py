@@ -1,4 +1,4 @@
-"""Platoon control environments: ``vdtn/platoon-control-v0`` and ``-impaired-v0``.
+"""Platoon control environments: ``vdtn/platoon-control-v0`` and ``-impaired-v1``.
 
 One step is one control interval (Δt = 50 ms). Agents ``vehicle_1..vehicle_{N−1}``.
 
@@ -24,6 +24,14 @@ follower with older CAM content (docs/model.md §4.5). Without it, observation i
 ``completion`` (``"none"``, ``"hold"``, ``"kalman"``, ``"learned"`` with
 ``completion_predictor=``, or a completer object) replaces stale CAM content in the impaired
 observations by a prediction (docs/model.md §4.7); with perfect observation it is a no-op.
+
+Version history (docs/model.md, "Version history"; ``vdtn/platoon-control-v0`` has no radio and
+stays v0):
+
+- ``vdtn/platoon-control-impaired-v1`` (2026-12):
+
+  - V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by default
+    (v0: Liang et al.'s form; ``v2v_pathloss_form="liang"`` restores it).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Radio resource allocation environment: ``vdtn/v2x-rra-v0``.
+"""Radio resource allocation environment: ``vdtn/v2x-rra-v1``.
 
 Agents ``rra_1..rra_{N−1}``: the base station's allocator of each V2V link, acting every 1 ms
 subframe. The control side runs inside with a given control module (impaired observations →
@@ -13,6 +13,13 @@ sub-channel in the last subframe, fraction of CAM bits left, fraction of the int
 four control features of its recipient (gap and speed error, predecessor acceleration, last
 command; normalised). Action: Discrete(M·P), sub-channel a // P, power level a % P (the last
 level is off).
+
+Version history (docs/model.md, "Version history"):
+
+- ``vdtn/v2x-rra-v1`` (2026-12):
+
+  - V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by default
+    (v0: Liang et al.'s form; ``v2v_pathloss_form="liang"`` restores it).
 """
 
 from __future__ import annotations

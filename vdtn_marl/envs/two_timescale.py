@@ -1,4 +1,4 @@
-"""The two-timescale wrapper: ``vdtn/vdtn-joint-v0`` (and the base of ``vdtn/v2x-rra-v0``).
+"""The two-timescale wrapper: ``vdtn/vdtn-joint-v1`` (and the base of ``vdtn/v2x-rra-v1``).
 
 One ``step()`` is one 1 ms subframe; ``t = step mod T`` (T = 50). Every agent has a clock:
 
@@ -27,6 +27,13 @@ impaired observations [1, F, 8] torch → commands [1, F]; linear CACC by defaul
 ``completion_predictor=``, or a completer object) replaces stale CAM content in the vehicle
 observations, those of the agents and those the control module reads, by a prediction
 (docs/model.md §4.7).
+
+Version history (docs/model.md, "Version history"):
+
+- ``vdtn/vdtn-joint-v1`` and ``vdtn/v2x-rra-v1`` (2026-12):
+
+  - V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by default
+    (v0: Liang et al.'s form; ``v2v_pathloss_form="liang"`` restores it).
 """
 
 from __future__ import annotations
