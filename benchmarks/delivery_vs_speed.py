@@ -1,4 +1,4 @@
-"""CAM delivery against platoon speed: where the V2V path loss crosses its breakpoint.
+"""CAM delivery against platoon speed: does the V2V path loss make delivery depend on speed?
 
 The leader drives at a constant speed v (m/s); the followers, driven by linear CACC on their
 impaired observations, keep their desired gap r + h·v, so every V2V link (i−1 → i) spans
@@ -7,14 +7,17 @@ twin runs ``--episodes`` scenarios × ``--intervals`` control intervals and repo
 delivery rate (within the CAM's interval), the median CAM latency (ms), the V2I throughput per
 link (Mbps), the V2V link distance (m) and its path loss (dB).
 
-Liang et al.'s form of the WINNER+ B1 path loss (docs/model.md §4.2) is 16.5 dB lower just
-beyond its breakpoint (6.67 m at 2 GHz, 1.5 m antennas) than just below it, so below about
-6.7 m/s the platoon's V2V links lose that much against interferers further away: this is why
-CAM delivery falls in the stop-and-go EPA city cycle.
+The default V2V path loss (``winner_b1``: WINNER+ B1 with effective antenna heights and a
+free-space floor, docs/model.md §4.2) is continuous at the breakpoint, and delivery has no
+cliff at low speed. ``--v2v-pathloss-form liang`` selects Liang et al.'s form, the v0 default:
+it is 16.5 dB lower just beyond its breakpoint (6.67 m at 2 GHz, 1.5 m antennas) than just
+below it, so below about 6.7 m/s the platoon's V2V links lose that much against interferers
+further away. That is why, with Liang's form, CAM delivery falls in the stop-and-go EPA city
+cycle.
 
     python benchmarks/delivery_vs_speed.py                  # writes results/delivery_vs_speed.json
-    python benchmarks/delivery_vs_speed.py --v2v-pathloss-form winner_b1 \
-        --output benchmarks/results/delivery_vs_speed_winner_b1.json   # the continuous form
+    python benchmarks/delivery_vs_speed.py --v2v-pathloss-form liang \
+        --output benchmarks/results/delivery_vs_speed_liang.json   # Liang's form: the cliff
     python benchmarks/delivery_vs_speed.py --speeds 0,25 --rra greedy --episodes 8 --output x.json
 """
 
@@ -34,7 +37,7 @@ from vdtn_marl.data.traces import ConstantSpeedTraceSource
 from vdtn_marl.results import is_finite
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim import channel
-from vdtn_marl.sim.params import V2V_PATHLOSS_FORMS, TwinParams
+from vdtn_marl.sim.params import V2V_PATHLOSS_FORMS, RadioParams, TwinParams
 from vdtn_marl.sim.platoon import desired_gaps_m
 
 RESULTS = Path(__file__).parent / "results" / "delivery_vs_speed.json"
@@ -49,8 +52,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument(
         "--v2v-pathloss-form",
         choices=V2V_PATHLOSS_FORMS,
-        default="liang",
-        help="V2V path loss beyond the breakpoint (docs/model.md §4.2)",
+        default=RadioParams().v2v_pathloss_form,
+        help="V2V path loss form (docs/model.md §4.2; default: the model's, %(default)s)",
     )
     p.add_argument("--seed", default="0", help="evaluation seed (one integer)")
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
