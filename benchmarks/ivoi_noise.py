@@ -70,12 +70,15 @@ class SyntheticIVoI:
         return self.effect * delivered + self.noise * noise
 
 
-#: ``--credit`` settings of the RRA learning problem: ``paper`` is the default (credit
-#: discounted per control interval, silent subframes masked, scenarios persisting across PPO
-#: iterations, 32 scenarios × 5 intervals per batch); ``legacy`` the setting before it (γ and λ
-#: per subframe, every subframe trains, fresh resets, 64 scenarios × 2 intervals).
+#: ``--credit`` settings of the RRA learning problem: ``paper`` is the default (γ = 0.99 per
+#: control interval, GAE λ = 0.95 per subframe, silent subframes masked, scenarios persisting
+#: across PPO iterations, 32 scenarios × 5 intervals per batch); ``paper_long_gae`` the same
+#: with λ = 0.95 per interval (λ^(1/T) per subframe: the sampled return, not the critic, carries
+#: the later intervals' credit); ``legacy`` the setting before them (γ = 0.99 per subframe,
+#: every subframe trains, fresh resets, 64 scenarios × 2 intervals).
 CREDITS = {
     "paper": {},
+    "paper_long_gae": dict(rra_lmbda=0.95 ** (1 / 50)),
     "legacy": dict(
         rra_credit="subframe", rra_mask_silent=False, persistent_envs=False,
         rra_num_envs=64, rra_rollout_steps=100,

@@ -98,6 +98,7 @@ def test_delivery_vs_speed_shows_the_breakpoint_cliff(tmp_path):
     spec.loader.exec_module(module)
     out = tmp_path / "speed.json"
     args = ["--speeds", "6.5,7.5", "--rra", "greedy", "--episodes", "8", "--intervals", "40"]
+    args += ["--v2v-pathloss-form", "liang"]  # the form with the cliff (the default has none)
     assert module.main([*args, "--output", str(out)]) == 0
     below, above = json.loads(out.read_text())["rows"]
     assert below["v2v_distance_m"] < 6.67 < above["v2v_distance_m"]

@@ -75,11 +75,11 @@ class AlgoConfig:
     gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)
     lmbda: float = 0.95  # GAE λ of the vehicles (per control interval)
     # RRA credit (docs/model.md §5): "interval" (the paper's objective, discounted per control
-    # interval): rra_gamma and rra_lmbda are per interval and apply as γ^(1/T), λ^(1/T) per
-    # subframe; "subframe": they apply per 1 ms subframe as given (horizon ≈ 100 ms at 0.99)
+    # interval): rra_gamma is per interval and applies as γ^(1/T) per subframe; "subframe":
+    # rra_gamma applies per 1 ms subframe as given (a horizon of ≈ 100 ms at 0.99)
     rra_credit: str = "interval"
     rra_gamma: float = 0.99  # RRA agents: discount (per interval with rra_credit=interval)
-    rra_lmbda: float = 0.95  # GAE λ of the RRA agents (per interval with rra_credit=interval)
+    rra_lmbda: float = 0.95  # GAE λ of the RRA agents, per subframe step
     # subframes whose link is silent (its CAM already delivered: the action has no effect)
     # do not train the RRA policy (their advantage is masked out)
     rra_mask_silent: bool = True
@@ -115,8 +115,7 @@ class AlgoConfig:
         """(γ, λ) per RRA step (one subframe) for ``rra_credit`` (docs/model.md §5)."""
         if self.rra_credit == "subframe":
             return self.rra_gamma, self.rra_lmbda
-        power = 1.0 / subframes_per_interval
-        return self.rra_gamma**power, self.rra_lmbda**power
+        return self.rra_gamma ** (1.0 / subframes_per_interval), self.rra_lmbda
 
 
 @dataclass

@@ -340,11 +340,16 @@ V1_CHANNEL_CHANGE = (
     "V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by "
     "default, was Liang et al.'s form"
 )
+V1_RRA_OBSERVATION_CHANGE = (
+    "RRA observation (what RRA agents and policies read) of 4M + 12 features, was 4M + 6: the "
+    "recipient's CAM content age, its last 3 CAM delays and 2 earlier commands appended "
+    "(vdtn_marl.sim.layout)"
+)
 V0_CHANNEL_HINT = "for v0's channel pass v2v_pathloss_form='liang'"
 VERSION_CHANGES: dict[str, tuple[str, ...]] = {
-    "vdtn/platoon-control-impaired-v1": (V1_CHANNEL_CHANGE,),
-    "vdtn/v2x-rra-v1": (V1_CHANNEL_CHANGE,),
-    "vdtn/vdtn-joint-v1": (V1_CHANNEL_CHANGE,),
+    "vdtn/platoon-control-impaired-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
+    "vdtn/v2x-rra-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
+    "vdtn/vdtn-joint-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
 }
 """Changes of each built-in id against its previous version (what DeprecatedEnvError says)."""
 for _new_id, _changes in VERSION_CHANGES.items():

@@ -230,6 +230,17 @@ def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):
     assert payload["position"]["iteration"] == 1
 
 
+def test_summary_lists_each_jocc_iterations_evaluation(tmp_path):
+    experiment = replace(TINY_EXPERIMENT, control_iterations=1, rra_iterations=1)
+    cfg = tiny_config(experiment=replace(experiment, jocc_iterations=2))
+    summary = JointOptimisation(cfg, tmp_path).run()
+    rows = summary["per_iteration"]
+    assert [row["jocc_iteration"] for row in rows] == [0, 1]
+    assert rows[-1]["cam_delivery_rate"] == summary["cam_delivery_rate"]
+    assert rows[-1]["gap_error_abs_m"] == summary["gap_error_abs_m"]
+    assert all(set(row) == set(rows[0]) and len(row) == 8 for row in rows)
+
+
 def test_truncated_foreign_and_mismatched_checkpoints_raise(tmp_path):
     cfg = tiny_config(experiment=replace(TINY_EXPERIMENT, control_iterations=1))
     JointOptimisation(cfg, tmp_path, task="control").run()
@@ -357,11 +368,11 @@ def test_mpc_controls_take_their_solver_steps_from_the_config(tmp_path, name, st
 
 
 @pytest.mark.parametrize(
-    "credit, rra_step", [("subframe", (0.97, 0.99)), ("interval", (0.97**0.02, 0.99**0.02))]
+    "credit, rra_step", [("subframe", (0.97, 0.99)), ("interval", (0.97**0.02, 0.99))]
 )
 def test_each_group_gets_the_gae_lambda_and_discount_of_its_clock(tmp_path, credit, rra_step):
     """Vehicles discount per control interval; RRA agents per subframe, with the interval's
-    γ and λ spread over its T = 50 subframes by default (the paper's objective)."""
+    γ spread over its T = 50 subframes by default (the paper's objective; λ per step)."""
     algo = replace(
         TINY_ALGO, lmbda=0.9, rra_lmbda=0.99, gamma=0.98, rra_gamma=0.97, rra_credit=credit
     )

@@ -90,6 +90,17 @@ TASK_STAGES = {
     "control_impaired": ("control_perfect", "control_impaired", "evaluate"),
     "rra": ("control_perfect", "rra", "evaluate"),
 }
+#: Metrics of each JOCC iteration's evaluation in the run summary (``per_iteration``).
+PER_ITERATION_METRICS = (
+    "jocc_iteration",
+    "cam_delivery_rate",
+    "v2i_throughput_mbps_per_link",
+    "gap_error_abs_m",
+    "speed_error_abs_mps",
+    "control_cost",
+    "collision_rate",
+    "evoi",
+)
 #: Evaluation scenarios are seeded apart from every training scenario.
 EVAL_SEED_OFFSET = 1_000_000_000
 LAST_CHECKPOINT = "last.pt"
@@ -577,6 +588,11 @@ class JointOptimisation:
             "seconds": seconds,
             "resumed": resumed,
             **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
+            # the evaluation after each JOCC iteration: does the loop improve across them?
+            "per_iteration": [
+                {k: row.get(k) for k in PER_ITERATION_METRICS if k in row}
+                for row in self.eval_log.rows
+            ],
             "config": to_dict(self.cfg),
         }
 

@@ -32,6 +32,9 @@ stays v0):
 
   - V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by default
     (v0: Liang et al.'s form; ``v2v_pathloss_form="liang"`` restores it).
+  - The RRA observation its ``rra_policy`` reads has 4M + 12 features (v0: 4M + 6): the
+    recipient's CAM content age, its last 3 CAM delays and its 2 earlier commands are appended
+    (:data:`vdtn_marl.sim.layout.RRA_OBS_FEATURES`).
 """
 
 from __future__ import annotations
@@ -111,7 +114,7 @@ class PlatoonControlEnv(VDTNParallelEnv):
         )
         self.metadata = {
             **self.metadata,
-            "name": "platoon_control_impaired_v0" if impaired else "platoon_control_v0",
+            "name": "platoon_control_impaired_v1" if impaired else "platoon_control_v0",
         }
         self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
         self.agents: list[str] = []

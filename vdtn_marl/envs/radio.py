@@ -20,6 +20,9 @@ Version history (docs/model.md, "Version history"):
 
   - V2V path loss WINNER+ B1 with effective antenna heights and a free-space floor by default
     (v0: Liang et al.'s form; ``v2v_pathloss_form="liang"`` restores it).
+  - RRA observation of 4M + 12 features (v0: 4M + 6): the recipient's CAM content age, its
+    last 3 CAM delays and its 2 earlier commands are appended
+    (:data:`vdtn_marl.sim.layout.RRA_OBS_FEATURES`).
 """
 
 from __future__ import annotations
