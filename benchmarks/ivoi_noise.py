@@ -15,9 +15,14 @@ doing so is how much noise a useful IVoI estimator may carry at this budget. Bud
 those of the ``reduced`` leaderboard (8 PPO iterations for π* and π̃, 16 for the RRA agents);
 the evaluation is JOCC's (16 held-out scenarios × 10 s).
 
-Writes ``benchmarks/results/ivoi_noise.json`` atomically. Example (the committed JSON):
+``--credit`` compares RRA learning problems paired by seed (:data:`CREDITS`). Writes
+``benchmarks/results/ivoi_noise.json`` atomically. The committed JSONs:
 
+    # model v0 and the legacy learning problem of that time (docs/jocc_rra_signal.md)
     python benchmarks/ivoi_noise.py --seeds 0,1 --noise 0,0.03,0.1,0.3
+    # the positive control of the v1 learning problem (docs/studies/2026-12-01-rra-positive-control.md)
+    python benchmarks/ivoi_noise.py --seeds 0,1,2 --noise 0 --credit paper,paper_long_gae,legacy \
+        --traces udds --output benchmarks/results/ivoi_positive_control.json
 """
 
 from __future__ import annotations
