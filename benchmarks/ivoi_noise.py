@@ -20,7 +20,7 @@ the evaluation is JOCC's (16 held-out scenarios × 10 s).
 
     # model v0 and the legacy learning problem of that time (docs/jocc_rra_signal.md)
     python benchmarks/ivoi_noise.py --seeds 0,1 --noise 0,0.03,0.1,0.3
-    # the positive control of the v1 learning problem (docs/studies/2026-12-01-rra-positive-control.md)
+    # the v1 positive control (docs/studies/2026-12-01-rra-positive-control.md)
     python benchmarks/ivoi_noise.py --seeds 0,1,2 --noise 0 --credit paper,paper_long_gae,legacy \
         --traces udds --output benchmarks/results/ivoi_positive_control.json
 """
