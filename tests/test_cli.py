@@ -357,8 +357,17 @@ def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
         assert compose("config", ["rra=throughput"]).rra.kappa1 == 1.0
 
 
-@pytest.mark.parametrize("benchmark", ["smoke", "leaderboard"])
+BENCHMARKS = sorted(p.stem for p in (ROOT / "conf" / "benchmark").glob("*.yaml"))
+
+
+def test_every_benchmark_config_is_tested():
+    assert {"smoke", "reduced", "leaderboard", "sensitivity"} <= set(BENCHMARKS)
+    assert cli_help.group_options("benchmark") == BENCHMARKS
+
+
+@pytest.mark.parametrize("benchmark", BENCHMARKS)
 def test_benchmark_configs_are_valid(benchmark):
+    """Every shipped benchmark composes, validates and composes every cell into a valid run."""
     _prevalidate("bench", [f"benchmark={benchmark}"])
 
 

@@ -7,6 +7,7 @@ import csv
 import json
 import math
 import os
+import re
 import subprocess
 import sys
 import warnings
@@ -292,15 +293,83 @@ def _bench(**changes) -> config.BenchConfig:
             {"interval": "normal"},
             "benchmark.interval='normal' is not allowed; choose one of t, bca, percentile",
         ),
+        (
+            {"extra_seeds": {"platoon9": {"a": [5]}}},
+            "benchmark.extra_seeds.platoon9 names no scenario of the benchmark; allowed: platoon4",
+        ),
+        (
+            {"extra_seeds": {"platoon4": {"zz": [5]}}},
+            "benchmark.extra_seeds.platoon4.zz names no method; allowed: a, b",
+        ),
+        (
+            {"extra_seeds": {"platoon4": {"a": [5, "6"]}}},
+            "benchmark.extra_seeds.platoon4.a=[5, '6'] lists '6', which is not an integer seed",
+        ),
+        (
+            {"extra_seeds": {"platoon4": {"a": [5, 2.5]}}},
+            "benchmark.extra_seeds.platoon4.a=[5, 2.5] lists 2.5, which is not an integer seed",
+        ),
+        (
+            {"extra_seeds": {"platoon4": {"a": [5, 6, 5]}}},
+            "benchmark.extra_seeds.platoon4.a=[5, 6, 5] lists 5 twice",
+        ),
+        (
+            {"extra_seeds": {"platoon4": {"a": [1, 5]}}},
+            "benchmark.extra_seeds.platoon4.a=[1, 5] lists 1, which benchmark.seeds=[0, 1] "
+            "already runs",
+        ),
+        (
+            {"target": {"method": "zz", "reference": "b", "error_metrics": ["gap_error_abs_m"]}},
+            "benchmark.target.method='zz' is not a method of the benchmark; allowed: a, b",
+        ),
+        (
+            {"target": {"method": "a", "reference": "a", "gain_metric": "evoi", "min_seeds": 2}},
+            "benchmark.target.reference='a' is benchmark.target.method too",
+        ),
+        (
+            {"target": {"method": "a", "reference": "b", "error_metrics": ["gap_error_m"]}},
+            "benchmark.target names the metric 'gap_error_m', which the leaderboard does not "
+            "report; allowed: control_cost, gap_error_abs_m",
+        ),
+        (
+            {"target": {"scenario": "platoon8", "method": "a", "reference": "b"}},
+            "benchmark.target.scenario='platoon8' is not a scenario of the benchmark",
+        ),
+        (
+            {"target": {"method": "a", "reference": "b", "min_seeds": 2}},
+            "benchmark.target sets neither error_metrics nor gain_metric",
+        ),
+        (
+            {"target": {"method": "a", "reference": "b", "gain_metric": "evoi", "min_seed": 2}},
+            "benchmark.target.min_seed is not a known key; allowed keys of benchmark.target: "
+            "error_metrics, gain_metric",
+        ),
+        (
+            {"target": {"method": "a", "reference": "b", "gain_metric": "evoi"}},
+            "benchmark.target.min_seeds=10 but the benchmark runs a and b on platoon4 for 2 "
+            "common seed(s), so the target could never be decided",
+        ),
+        (
+            {
+                "target": {
+                    "method": "a",
+                    "reference": "b",
+                    "gain_metric": "evoi",
+                    "min_seeds": 2,
+                    "max_error_ratio": 0.0,
+                }
+            },  # fmt: skip
+            "benchmark.target.max_error_ratio=0.0 is outside the allowed range (0.0,",
+        ),
     ],
 )
 def test_bad_benchmarks_are_rejected(changes, message):
-    with pytest.raises(ConfigError, match=message.replace("(", r"\(").replace("[", r"\[")):
+    with pytest.raises(ConfigError, match=re.escape(message)):
         config.validate_benchmark(_bench(**changes))
 
 
 def test_shipped_benchmarks_plan_their_grid():
-    for name, cells in (("smoke", 12), ("reduced", 165), ("leaderboard", 165)):
+    for name, cells in (("smoke", 12), ("reduced", 185), ("leaderboard", 165), ("sensitivity", 25)):
         data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
         cfg = config.validate_benchmark(
             config.BenchConfig(benchmark=config.BenchmarkConfig(**data))
@@ -310,6 +379,74 @@ def test_shipped_benchmarks_plan_their_grid():
     lb = cli_help.read_conf_yaml("benchmark", "leaderboard.yaml")
     assert len(lb["seeds"]) >= 5
     assert {"platoon4", "platoon8", "platoon4_1mhz"} <= set(lb["scenarios"])
+
+
+def test_reduced_checks_the_headline_target_on_ten_seeds():
+    data = cli_help.read_conf_yaml("benchmark", "reduced.yaml")
+    cfg = config.validate_benchmark(config.BenchConfig(benchmark=config.BenchmarkConfig(**data)))
+    b = cfg.benchmark
+    assert b.version == "3.0"
+    t = b.target
+    assert isinstance(t, config.BenchmarkTargetConfig)
+    assert (t.scenario, t.method, t.reference, t.max_error_ratio, t.min_seeds) == (
+        "platoon4", "jocc_k050", "drra", 1.25, 10,
+    )  # fmt: skip
+    assert set(t.error_metrics) | {t.gain_metric} <= set(leaderboard.METRIC_KEYS)
+    assert t.error_metrics == ["gap_error_abs_m", "speed_error_abs_mps"]
+    assert t.gain_metric == "v2i_throughput_mbps_per_link"
+    for method in ("jocc_k050", "drra", "throughput", "greedy"):
+        assert config.benchmark_seeds(b, "platoon4", method) == list(range(10)), method
+    assert config.benchmark_seeds(b, "platoon8", "jocc_k050") == list(range(5))
+    for method in ("jocc_k025", "jocc_k050", "jocc_k075", "drra", "throughput",
+                   "no_augmentation", "cacc"):  # fmt: skip
+        assert "experiment.jocc_iterations=3" in b.budgets[method], method
+        assert "experiment.rra_iterations=16" in b.budgets[method], method
+    assert not {"random", "round_robin", "greedy", "oracle"} & set(b.budgets)
+    smoke = cli_help.read_conf_yaml("benchmark", "smoke.yaml")
+    assert smoke["version"] == "2.0" and smoke["experiment"] == "smoke"
+    assert not any("jocc_iterations" in str(o) for o in smoke.get("budgets", {}).values())
+    sens = cli_help.read_conf_yaml("benchmark", "sensitivity.yaml")
+    assert (sens["version"], sens["scenarios"]) == ("1.0", ["platoon4_noise90"])
+    assert sens["overrides"] == data["overrides"]
+    assert {m: sens["methods"][m] for m in sens["methods"]} == {
+        m: data["methods"][m] for m in sens["methods"]
+    }
+    assert sens["budgets"] == {
+        m: data["budgets"][m] for m in sens["methods"] if m in data["budgets"]
+    }
+
+
+def test_extra_seeds_run_after_the_main_cells_seed_by_seed():
+    cfg = _bench(
+        methods={"a": ["rra=random"], "b": [], "c": []},
+        extra_seeds={"platoon4": {"c": [3, 2], "a": [2]}},
+    )
+    config.validate_benchmark(cfg)
+    names = [c.name for c in leaderboard.plan(cfg)]
+    assert names == [
+        *(f"platoon4/{m}/seed{s}" for s in (0, 1) for m in "abc"),
+        "platoon4/a/seed2", "platoon4/c/seed2", "platoon4/c/seed3",
+    ]  # fmt: skip
+    cell = leaderboard.plan(cfg)[-1]
+    assert cell.overrides[-1] == "seed=3" and cell.overrides[0] == "scenario=platoon4"
+    assert config.benchmark_seeds(cfg.benchmark, "platoon4", "c") == [0, 1, 3, 2]
+    assert config.benchmark_seeds(cfg.benchmark, "platoon4", "b") == [0, 1]
+    # extra seeds decide runs: an out_dir of the same version without them is another definition
+    assert "extra_seeds" in leaderboard.grid.RUN_FIELDS
+
+
+def test_bench_rejects_bad_extra_seeds_in_one_line(tmp_path, capsys):
+    code = cli.main(
+        ["bench", "benchmark=smoke", f"out_dir={tmp_path / 'o'}",
+         "+benchmark.extra_seeds.platoon4={drra: [1, 7]}"]
+    )  # fmt: skip
+    assert code == cli.EXIT_CONFIG_ERROR
+    err = capsys.readouterr().err.strip()
+    assert err == (
+        "error: benchmark.extra_seeds.platoon4.drra=[1, 7] lists 1, which benchmark.seeds=[0, 1] "
+        "already runs; allowed: seeds outside benchmark.seeds"
+    )
+    assert not (tmp_path / "o").exists()
 
 
 def test_methods_must_share_the_evaluation_scenarios():
@@ -545,3 +682,269 @@ def test_report_names_each_scenarios_leader_traces():
     assert "evaluation draws traces training never saw); b: `udds` (EPA Urban" in line
     assert "the first 80% of each drive, evaluation from the last 20%)" in line
     assert line.endswith("d: `csv` file `drive.csv`, divided into train and eval parts")
+
+
+# --- the target check ------------------------------------------------------------------------
+
+
+T_3_975 = 3.182446305284263  # t quantile, 3 degrees of freedom, 0.975 (tables: 3.182)
+
+
+def test_fieller_interval_of_a_ratio_by_hand():
+    # y = [1, 2, 3, 4], x = [2, 3, 5, 6]: x̄ = 4, ȳ = 2.5, ratio 1.6; s_yy = 5/3, s_xx = 10/3,
+    # s_xy = 7/3; q = t(3)² / 4 = 2.531991; a = 6.25 − q·5/3 = 2.030015,
+    # b/2 = 10 − q·7/3 = 4.092021, c = 16 − q·10/3 = 7.560030;
+    # roots (b/2 ∓ √((b/2)² − a·c)) / a = (4.092021 ∓ 1.182226) / 2.030015 = 1.43339, 2.59813
+    x, y = [2.0, 3.0, 5.0, 6.0], [1.0, 2.0, 3.0, 4.0]
+    q = T_3_975**2 / 4
+    a, half_b, c = 6.25 - q * 5 / 3, 10 - q * 7 / 3, 16 - q * 10 / 3
+    assert (a, half_b, c) == (
+        pytest.approx(2.030015, abs=1e-6), pytest.approx(4.092021, abs=1e-6),
+        pytest.approx(7.560030, abs=1e-6),
+    )  # fmt: skip
+    ratio, low, high = leaderboard.fieller_ratio_ci(x, y)
+    assert ratio == pytest.approx(1.6)
+    assert (low, high) == (pytest.approx(1.43339, abs=1e-5), pytest.approx(2.59813, abs=1e-5))
+    assert low < ratio < high  # asymmetric around the ratio, unlike the delta method
+    assert high - ratio > ratio - low
+    # the defining property: at each bound the paired t statistic of x − ρ·y is ±t(3)
+    for rho in (low, high):
+        d = np.asarray(x) - rho * np.asarray(y)
+        stat = d.mean() / (d.std(ddof=1) / 2.0)
+        assert abs(stat) == pytest.approx(T_3_975, rel=1e-9)
+    # and a bound above the interval is exactly one where the t interval of x − bound·y < 0
+    for bound, below in ((2.7, True), (2.5, False), (1.3, False)):
+        _, _, d_high = leaderboard.t_ci(list(np.asarray(x) - bound * np.asarray(y)))
+        assert (d_high < 0) == below == (high < bound), bound
+    # x = 1.2·y exactly: a zero-width interval at 1.2 (x − ρ·y = (1.2 − ρ)·y has the t
+    # statistic of y, far from 0 here); one pair: zero width
+    assert leaderboard.fieller_ratio_ci([12.0, 13.2, 14.4], [10.0, 11.0, 12.0]) == pytest.approx(
+        (1.2, 1.2, 1.2)
+    )
+    # ... but with y = [1, 2, 3] (t statistic 3.46 < t(2) = 4.30) every ρ is in the set
+    assert leaderboard.fieller_ratio_ci([1.2, 2.4, 3.6], [1.0, 2.0, 3.0])[1:] == (None, None)
+    assert leaderboard.fieller_ratio_ci([3.0], [2.0]) == (1.5, 1.5, 1.5)
+    # a reference mean not distinguishable from 0: unbounded; a zero mean: no ratio
+    assert leaderboard.fieller_ratio_ci([1.0, 2.0, 1.5], [-1.0, 1.5, 0.2])[1:] == (None, None)
+    assert leaderboard.fieller_ratio_ci([1.0, 2.0], [-1.0, 1.0]) == (None, None, None)
+
+
+def _target_rows(errors: dict[str, list[float]], gain: dict[str, list[float]]) -> list[dict]:
+    """Rows of methods "jocc" and "drra" on platoon4: per seed, gap error = errors[m][k],
+    speed error = errors[m][k] / 2, V2I throughput = gain[m][k]."""
+    rows = []
+    for method in ("jocc", "drra"):
+        for seed, (error, v2i) in enumerate(zip(errors[method], gain[method], strict=True)):
+            rows.append(
+                {"scenario": "platoon4", "method": method, "seed": seed,
+                 "gap_error_abs_m": error, "speed_error_abs_mps": error / 2,
+                 "v2i_throughput_mbps_per_link": v2i}
+            )  # fmt: skip
+    return rows
+
+
+def _target_benchmark(min_seeds: int = 10) -> config.BenchmarkConfig:
+    return config.BenchmarkConfig(
+        name="t",
+        methods={"jocc": [], "drra": []},
+        seeds=list(range(10)),
+        target=config.BenchmarkTargetConfig(
+            scenario="platoon4", method="jocc", reference="drra", max_error_ratio=1.25,
+            error_metrics=["gap_error_abs_m", "speed_error_abs_mps"],
+            gain_metric="v2i_throughput_mbps_per_link", min_seeds=min_seeds,
+        ),
+    )  # fmt: skip
+
+
+DRRA_ERRORS = [0.40, 0.55, 0.30, 0.62, 0.48, 0.35, 0.51, 0.44, 0.58, 0.39]
+DRRA_V2I = [1.30, 1.42, 1.25, 1.51, 1.38, 1.29, 1.47, 1.33, 1.40, 1.36]
+
+
+def test_target_met_by_hand_made_summaries():
+    # JOCC's errors 1.05-1.15 × DRRA's seed by seed, its throughput 0.05-0.09 Mbps higher
+    factors = [1.05, 1.10, 1.15, 1.08, 1.12, 1.06, 1.14, 1.09, 1.11, 1.07]
+    rows = _target_rows(
+        {"jocc": [e * f for e, f in zip(DRRA_ERRORS, factors, strict=True)], "drra": DRRA_ERRORS},
+        {"jocc": [v + 0.05 + 0.004 * k for k, v in enumerate(DRRA_V2I)], "drra": DRRA_V2I},
+    )
+    result = leaderboard.check_target(rows, _target_benchmark())
+    assert result["status"] == "met"
+    gap, speed, v2i = result["criteria"]
+    assert [c["metric"] for c in result["criteria"]] == [
+        "gap_error_abs_m", "speed_error_abs_mps", "v2i_throughput_mbps_per_link",
+    ]  # fmt: skip
+    for c in (gap, speed):
+        assert c["kind"] == "error_ratio" and c["n"] == 10 and c["seeds"] == list(range(10))
+        jocc = sum(e * f for e, f in zip(DRRA_ERRORS, factors, strict=True))
+        assert c["estimate"] == pytest.approx(jocc / sum(DRRA_ERRORS))  # ratio of means
+        assert c["ci_low"] < c["estimate"] < c["ci_high"] <= 1.25
+        assert (c["status"], c["verdict"]) == ("met", "met")
+    assert speed["estimate"] == pytest.approx(gap["estimate"])  # the same ratio, halved errors
+    diffs = [0.05 + 0.004 * k for k in range(10)]
+    mean, low, high = leaderboard.t_ci(diffs)
+    assert (v2i["kind"], v2i["interval"]) == ("gain_difference", "t")
+    assert (v2i["estimate"], v2i["ci_low"], v2i["ci_high"]) == (
+        pytest.approx(mean), pytest.approx(low), pytest.approx(high),
+    )  # fmt: skip
+    assert mean == pytest.approx(0.068) and low > 0 and v2i["verdict"] == "met"
+    from vdtn_marl.leaderboard.target import target_markdown
+
+    text = "\n".join(target_markdown(result))
+    assert text.startswith("## Target: jocc against drra on platoon4")
+    assert "| \\|gap error\\| (m): ratio | 10 |" in text
+    assert "| V2I throughput per link (Mbps): difference | 10 |" in text
+    assert "| ratio ≤ 1.25 | met |" in text and "**Target met.**" in text
+
+
+def test_target_missed_by_hand_made_summaries():
+    # JOCC's errors twice DRRA's (±), its throughput lower by 0.10-0.14
+    factors = [1.9, 2.1, 2.0, 1.95, 2.05, 2.0, 1.9, 2.1, 2.0, 2.0]
+    jocc = [e * f for e, f in zip(DRRA_ERRORS, factors, strict=True)]
+    rows = _target_rows(
+        {"jocc": jocc, "drra": DRRA_ERRORS},
+        {"jocc": [v - 0.10 - 0.004 * k for k, v in enumerate(DRRA_V2I)], "drra": DRRA_V2I},
+    )
+    result = leaderboard.check_target(rows, _target_benchmark())
+    assert result["status"] == "missed"
+    gap, _, v2i = result["criteria"]
+    ratio = sum(jocc) / sum(DRRA_ERRORS)
+    assert gap["estimate"] == pytest.approx(ratio) and gap["ci_low"] > 1.25
+    assert gap["status"] == "missed" and gap["verdict"] == f"missed by {ratio - 1.25:.3g}"
+    assert v2i["ci_high"] < 0 and v2i["estimate"] == pytest.approx(-0.118)
+    assert v2i["verdict"] == "missed by 0.118"
+
+
+def test_target_not_decided_with_few_seeds_or_a_wide_interval():
+    # 5 seeds of an otherwise clear miss: not decided, whatever the interval says
+    rows = _target_rows(
+        {"jocc": [2 * e for e in DRRA_ERRORS[:5]], "drra": DRRA_ERRORS[:5]},
+        {"jocc": [v + 0.2 for v in DRRA_V2I[:5]], "drra": DRRA_V2I[:5]},
+    )
+    result = leaderboard.check_target(rows, _target_benchmark())
+    assert result["status"] == "not decided"
+    assert {c["verdict"] for c in result["criteria"]} == {"not decided: n = 5 < min_seeds = 10"}
+    assert leaderboard.check_target(rows, _target_benchmark(min_seeds=5))["status"] == "missed"
+    # ratios scattered around 1.25 and throughput gains around 0: both straddle
+    factors = [0.9, 1.6, 1.1, 1.5, 1.0, 1.45, 1.2, 1.3, 1.05, 1.4]
+    rows = _target_rows(
+        {"jocc": [e * f for e, f in zip(DRRA_ERRORS, factors, strict=True)], "drra": DRRA_ERRORS},
+        {"jocc": [v + (0.1 if k % 2 else -0.1) for k, v in enumerate(DRRA_V2I)], "drra": DRRA_V2I},
+    )
+    result = leaderboard.check_target(rows, _target_benchmark())
+    assert result["status"] == "not decided"
+    for c in result["criteria"]:
+        assert c["ci_low"] < c["bound"] < c["ci_high"], c["metric"]
+        bound = "1.25" if c["kind"] == "error_ratio" else "0"
+        assert c["verdict"] == f"not decided: the interval straddles the bound ({bound})"
+    # seeds pair by seed: a seed only one method has is left out, and so is a missing value
+    rows = [r for r in rows if not (r["method"] == "drra" and r["seed"] == 9)]
+    rows[0]["gap_error_abs_m"] = None
+    result = leaderboard.check_target(rows, _target_benchmark(min_seeds=8))
+    assert [c["n"] for c in result["criteria"]] == [8, 9, 9]
+    assert result["criteria"][0]["seeds"] == list(range(1, 9))
+    # no target: no target report
+    assert leaderboard.check_target(rows, config.BenchmarkConfig(name="t")) is None
+
+
+# --- a report of cells with different n (extra seeds), from hand-made run directories -------
+
+
+def _fake_run(cfg: config.BenchConfig, cell, data: dict) -> None:
+    k, method = cell.seed, cell.method
+    shift = {"a": 0.0, "b": 0.1, "c": 0.3}[method]
+    summary = {key: 1.0 + shift + 0.01 * k for key in leaderboard.METRIC_KEYS}
+    summary.update(
+        gap_error_abs_m=0.5 * (1 + shift) + 0.02 * k,
+        v2i_throughput_mbps_per_link=1.0 - shift + 0.003 * k * k,
+        iterations=1,
+        seconds=2.0,
+        trainer_iterations={"pi_star": 1, "pi_tilde": 1, "rra": 1 if method != "c" else 0},
+        config=data,
+    )
+    directory = cell.directory(cfg.out_dir)
+    directory.mkdir(parents=True)
+    (directory / "summary.json").write_text(json.dumps(summary))
+
+
+def test_report_of_cells_with_different_n(tmp_path):
+    cfg = _bench(
+        methods={"a": [], "b": [], "c": []},
+        seeds=[0, 1, 2],
+        extra_seeds={"platoon4": {"a": [3, 4], "b": [3, 4, 5], "c": [3]}},
+        trace_methods=["a", "b"],
+        target={"method": "a", "reference": "b", "error_metrics": ["gap_error_abs_m"],
+                "gain_metric": "v2i_throughput_mbps_per_link", "min_seeds": 5},
+    )  # fmt: skip
+    cfg.out_dir, cfg.report_dir = str(tmp_path / "runs"), str(tmp_path / "report")
+    config.validate_benchmark(cfg)
+    cells = leaderboard.plan(cfg)
+    assert len(cells) == 9 + 6
+    composed = {}
+    for cell in cells:
+        data = {
+            "seed": cell.seed,
+            "scenario": {"name": "platoon4", "traces": "udds", "trace_path": None},
+            "experiment": {"name": "t", "jocc_iterations": 1, "eval_episodes": 2,
+                           "eval_intervals": 5},
+            "algo": {"num_envs": 2, "rollout_steps": 8, "rra_rollout_steps": 16},
+            "rra": {"name": "jocc", "kappa1": 0.5}, "control": {"name": "learned"},
+        }  # fmt: skip
+        _fake_run(cfg, cell, data)
+        composed[cell] = (data, None)
+    written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
+    data = _strict_json(written["json"])
+    assert data["cells"] == {"total": 15, "complete": 15}
+    stats = data["statistics"]["platoon4"]
+    assert {m: stats[m]["control_cost"]["n"] for m in "abc"} == {"a": 5, "b": 6, "c": 4}
+    gap_a = [0.5 + 0.02 * k for k in range(5)]
+    assert stats["a"]["gap_error_abs_m"]["mean"] == pytest.approx(np.mean(gap_a))
+    pair = data["paired_differences"]["platoon4"]
+    assert pair["seeds"] == [0, 1, 2, 3, 4]  # the seeds both have (b's seed 5 is left out)
+    assert pair["differences"]["gap_error_abs_m"]["n"] == 5
+    assert pair["differences"]["gap_error_abs_m"]["mean"] == pytest.approx(-0.05)
+    target = data["target"]
+    assert [c["n"] for c in target["criteria"]] == [5, 5]
+    assert target["criteria"][0]["estimate"] == pytest.approx(0.54 / 0.59)  # 0.91 ≤ 1.25
+    assert target["criteria"][0]["status"] == "met"
+    assert target["criteria"][1]["estimate"] == pytest.approx(0.1)  # a − b = +0.1 each seed
+    assert target["status"] == "met"
+    assert len(data["runs"]) == 15
+    # marl-eval needs the same runs everywhere: only the runs of `seeds`
+    raw = _strict_json(written["marl_eval"])
+    runs = raw["vdtn-t-v1"]["platoon4"]
+    assert {m: list(r) for m, r in runs.items()} == {
+        m: ["seed_0", "seed_1", "seed_2"] for m in "abc"
+    }
+    with open(written["runs_csv"], newline="", encoding="utf-8") as handle:
+        assert len(list(csv.DictReader(handle))) == 15
+    text = written["markdown"].read_text(encoding="utf-8")
+    assert "## Target: a against b on platoon4" in text and "**Target met.**" in text
+    assert text.index("## Target") < text.index("## Methods")
+    assert "- **seeds**: 0, 1, 2 (3 runs per scenario × method); extra seeds" in text
+    assert "methods have): platoon4 — a: 3, 4; b: 3, 4, 5; c: 3\n" in text
+    assert "| a | 5 |" in text and "| b | 6 |" in text and "| c | 4 |" in text
+    assert "mean difference over 5 seeds" in text
+    assert "IQM not reported: 4, 5, 6 run(s) per method" in text
+    assert "the 6 run(s) of `extra_seeds` are left out" in text
+    for kind in ("v2i_throughput", "cam_delivery", "control_cost"):
+        assert written[f"platoon4/{kind}"].read_bytes().startswith(PNG_MAGIC)
+    # the rich table and the target verdicts
+    from rich.console import Console
+
+    console = Console(record=True, width=200)
+    leaderboard.print_leaderboard(written["json"], console=console)
+    printed = console.export_text()
+    assert "target (a against b on platoon4): met" in printed
+    # `bench summarize` tables every run, whatever the n of its method
+    assert cli.main(["bench", "summarize", cfg.out_dir, "--csv", str(tmp_path / "s.csv")]) == 0
+    with open(tmp_path / "s.csv", newline="", encoding="utf-8") as handle:
+        table = list(csv.DictReader(handle))
+    assert len(table) == 15
+    assert sorted(r["run"] for r in table if "/b/" in r["run"]) == [
+        f"platoon4/b/seed{k}" for k in range(6)
+    ]
+    # without a target: no target report
+    cfg.benchmark.target = None
+    written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
+    assert "target" not in _strict_json(written["json"])
+    assert "## Target" not in written["markdown"].read_text(encoding="utf-8")

@@ -365,6 +365,27 @@ BENCHMARK_INTERVALS = ("t", "bca", "percentile")
 
 
 @dataclass
+class BenchmarkTargetConfig:
+    """The benchmark's headline claim, checked by the report (``benchmark.target``).
+
+    On ``scenario``, ``method`` against ``reference``, paired by seed (the seeds both have):
+    for each of ``error_metrics`` the ratio of means method/reference must stay at or below
+    ``max_error_ratio`` (its interval: Fieller's, the ratios ρ for which the t interval of the
+    per-seed differences method − ρ·reference holds 0), and ``gain_metric`` must be above the
+    reference's (the t interval of the paired differences above 0). A criterion is decided
+    only from ``min_seeds`` paired seeds on (vdtn_marl.leaderboard.target).
+    """
+
+    scenario: str = "platoon4"
+    method: str = ""
+    reference: str = ""
+    max_error_ratio: float = 1.25
+    error_metrics: list[str] = field(default_factory=list)
+    gain_metric: str | None = None
+    min_seeds: int = 10
+
+
+@dataclass
 class BenchmarkConfig:
     """A benchmark: ``scenarios`` × ``methods`` × ``seeds``, every run with ``experiment``.
 
@@ -382,6 +403,12 @@ class BenchmarkConfig:
     ``t`` (Student-t, the default), ``bca`` or ``percentile`` (bootstrap with
     ``bootstrap_resamples`` resamples). The IQM's interval is always a bootstrap: BCa under
     ``t`` and ``bca``, percentile under ``percentile``.
+
+    ``extra_seeds`` (``{scenario: {method: [seeds]}}``) runs those cells for these seeds too,
+    after the cells of ``seeds`` (e.g. more seeds for the headline comparison only); methods
+    then differ in n, and paired differences use the seeds both methods have. ``target``
+    (:class:`BenchmarkTargetConfig`, optional) adds the check of the headline claim to the
+    report.
     """
 
     name: str = "smoke"
@@ -393,11 +420,14 @@ class BenchmarkConfig:
     methods: dict[str, list[str]] = field(default_factory=dict)
     budgets: dict[str, list[str]] = field(default_factory=dict)
     seeds: list[int] = field(default_factory=lambda: [0])
+    # {scenario: {method: [seeds]}}: cells run for these seeds in addition to `seeds`
+    extra_seeds: dict[str, dict[str, list[int]]] = field(default_factory=dict)
     # the two methods whose gap/speed error traces are compared (same scenario and seed)
     trace_methods: list[str] = field(default_factory=list)
     interval: str = "t"  # one of BENCHMARK_INTERVALS
     bootstrap_resamples: int = 10_000  # resamples of the bootstrap CIs (bca/percentile, IQM)
     confidence: float = 0.95
+    target: BenchmarkTargetConfig | None = None  # the headline claim the report checks
 
 
 @dataclass
@@ -476,6 +506,8 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
                 f"benchmark.trace_methods={list(b.trace_methods)} names {method!r}, which is not "
                 f"a method; allowed: {', '.join(b.methods)}"
             )
+    _validate_extra_seeds(b)
+    _validate_target(b)
     _choice("benchmark.interval", b.interval, BENCHMARK_INTERVALS)
     _positive_int("benchmark.bootstrap_resamples", b.bootstrap_resamples, low=100, high=10**7)
     _real("benchmark.confidence", b.confidence, 0.5, 1.0, low_open=True)
@@ -486,6 +518,119 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
     if not cfg.out_dir:
         raise ConfigError("out_dir='' must name the directory of the benchmark's runs")
     return cfg
+
+
+def benchmark_seeds(b: BenchmarkConfig, scenario: str, method: str) -> list[int]:
+    """The seeds a benchmark runs for one scenario × method: ``seeds``, then its
+    ``extra_seeds``."""
+    extra = (b.extra_seeds or {}).get(scenario, {}).get(method, [])
+    return [int(s) for s in b.seeds] + [int(s) for s in extra]
+
+
+def _validate_extra_seeds(b: BenchmarkConfig) -> None:
+    """``benchmark.extra_seeds``: known scenarios and methods, integer seeds listed once and
+    not already in ``benchmark.seeds``."""
+    from collections.abc import Mapping
+
+    extra = b.extra_seeds if b.extra_seeds is not None else {}
+    if not isinstance(extra, Mapping):
+        raise ConfigError(
+            f"benchmark.extra_seeds={extra!r} must map scenario → method → [seeds], "
+            "e.g. {platoon4: {drra: [5, 6]}}"
+        )
+    for scenario, by_method in extra.items():
+        where = f"benchmark.extra_seeds.{scenario}"
+        if scenario not in b.scenarios:
+            raise ConfigError(
+                f"{where} names no scenario of the benchmark; allowed: {', '.join(b.scenarios)}"
+            )
+        if not isinstance(by_method, Mapping):
+            raise ConfigError(f"{where}={by_method!r} must map method → [seeds]")
+        for method, seeds in by_method.items():
+            key = f"{where}.{method}"
+            if method not in b.methods:
+                raise ConfigError(f"{key} names no method; allowed: {', '.join(b.methods)}")
+            if isinstance(seeds, str | bytes) or not hasattr(seeds, "__iter__"):
+                raise ConfigError(f"{key}={seeds!r} must be a list of integer seeds")
+            values = list(seeds)
+            for seed in values:
+                if isinstance(seed, bool) or not isinstance(seed, int) or not 0 <= seed < 2**63:
+                    raise ConfigError(
+                        f"{key}={values} lists {seed!r}, which is not an integer seed in "
+                        f"[0, {2**63 - 1}]"
+                    )
+            twice = sorted({s for s in values if values.count(s) > 1})
+            if twice:
+                raise ConfigError(f"{key}={values} lists {twice[0]} twice")
+            again = [s for s in values if s in set(b.seeds)]
+            if again:
+                raise ConfigError(
+                    f"{key}={values} lists {again[0]}, which benchmark.seeds={list(b.seeds)} "
+                    "already runs; allowed: seeds outside benchmark.seeds"
+                )
+
+
+def _validate_target(b: BenchmarkConfig) -> None:
+    """``benchmark.target``: a scenario and two methods of the benchmark, known metrics, a
+    positive bound, and enough seeds planned to decide it (``min_seeds``)."""
+    from collections.abc import Mapping
+
+    if b.target is None:
+        return
+    if isinstance(b.target, Mapping):
+        names = {f.name for f in fields(BenchmarkTargetConfig)}
+        unknown = sorted(set(map(str, b.target)) - names)
+        if unknown:
+            raise ConfigError(
+                f"benchmark.target.{unknown[0]} is not a known key; allowed keys of "
+                f"benchmark.target: {', '.join(sorted(names))}"
+            )
+        b.target = BenchmarkTargetConfig(**dict(b.target))
+    t = b.target
+    from vdtn_marl.leaderboard.grid import METRIC_KEYS
+
+    if t.scenario not in b.scenarios:
+        raise ConfigError(
+            f"benchmark.target.scenario={t.scenario!r} is not a scenario of the benchmark; "
+            f"allowed: {', '.join(b.scenarios)}"
+        )
+    for key in ("method", "reference"):
+        value = getattr(t, key)
+        if value not in b.methods:
+            raise ConfigError(
+                f"benchmark.target.{key}={value!r} is not a method of the benchmark; "
+                f"allowed: {', '.join(b.methods)}"
+            )
+    if t.method == t.reference:
+        raise ConfigError(
+            f"benchmark.target.reference={t.reference!r} is benchmark.target.method too; "
+            "allowed: another method"
+        )
+    metrics = list(t.error_metrics or [])
+    for metric in [*metrics, *([t.gain_metric] if t.gain_metric is not None else [])]:
+        if metric not in METRIC_KEYS:
+            raise ConfigError(
+                f"benchmark.target names the metric {metric!r}, which the leaderboard does not "
+                f"report; allowed: {', '.join(METRIC_KEYS)}"
+            )
+    if len(set(metrics)) != len(metrics):
+        raise ConfigError(f"benchmark.target.error_metrics={metrics} lists a metric twice")
+    if not metrics and t.gain_metric is None:
+        raise ConfigError(
+            "benchmark.target sets neither error_metrics nor gain_metric; allowed: at least one"
+        )
+    _real("benchmark.target.max_error_ratio", t.max_error_ratio, 0.0, 1e9, low_open=True)
+    _positive_int("benchmark.target.min_seeds", t.min_seeds, low=2, high=10**9)
+    paired = set(benchmark_seeds(b, t.scenario, t.method)) & set(
+        benchmark_seeds(b, t.scenario, t.reference)
+    )
+    if len(paired) < t.min_seeds:
+        raise ConfigError(
+            f"benchmark.target.min_seeds={t.min_seeds} but the benchmark runs {t.method} and "
+            f"{t.reference} on {t.scenario} for {len(paired)} common seed(s), so the target "
+            "could never be decided; allowed: more benchmark.seeds or benchmark.extra_seeds, "
+            "or a smaller min_seeds"
+        )
 
 
 def register_configs() -> None:

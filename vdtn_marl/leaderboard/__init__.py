@@ -18,8 +18,9 @@ at least :data:`~vdtn_marl.leaderboard.stats.MIN_RUNS_FOR_IQM` runs; see
 :mod:`~vdtn_marl.leaderboard.stats`) and writes, into ``report_dir``:
 
 - ``LEADERBOARD.md``: one table per scenario, the best mean per column in bold, the version
-  and the exact command on top, the two ``trace_methods`` compared paired by seed (both see
-  the same held-out scenarios per seed), and the plots;
+  and the exact command on top, the verdict on ``benchmark.target`` (where set), the two
+  ``trace_methods`` compared paired by seed (both see the same held-out scenarios per seed),
+  and the plots;
 - ``leaderboard.json`` (statistics and runs), ``leaderboard_marl_eval.json`` (the raw-data
   format of InstaDeep's marl-eval), ``leaderboard.csv`` (statistics, one row per scenario ×
   method × metric) and ``leaderboard_runs.csv`` (one row per run);
@@ -32,6 +33,7 @@ Every file carries the benchmark's name and version.
 Modules: :mod:`~vdtn_marl.leaderboard.grid` (metrics, cells, their configs, the output
 directory's state), :mod:`~vdtn_marl.leaderboard.runner` (running the grid),
 :mod:`~vdtn_marl.leaderboard.stats` (statistics across seeds, marl-eval export),
+:mod:`~vdtn_marl.leaderboard.target` (the check of ``benchmark.target``, the headline claim),
 :mod:`~vdtn_marl.leaderboard.plots` and :mod:`~vdtn_marl.leaderboard.report` (the report).
 """
 
@@ -80,6 +82,7 @@ from vdtn_marl.leaderboard.stats import (
     statistics,
     t_ci,
 )
+from vdtn_marl.leaderboard.target import check_target, fieller_ratio_ci
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -113,11 +116,13 @@ __all__ = [
     "best_methods",
     "bootstrap_ci",
     "cell_overrides",
+    "check_target",
     "check_eval_pairing",
     "check_out_dir",
     "complete_summary",
     "compose_cell",
     "describe_interval",
+    "fieller_ratio_ci",
     "main",
     "manifest",
     "marl_eval_data",

@@ -91,18 +91,39 @@ def cell_overrides(
 
 
 def plan(cfg: BenchConfig) -> list[Cell]:
-    """Every cell, seed by seed (so a partial run has every method on the first seeds)."""
+    """Every cell, seed by seed (so a partial run has every method on the first seeds): the
+    cells of ``seeds``, then those of ``extra_seeds``, again seed by seed (each seed in the
+    benchmark's order of scenarios and methods)."""
     b = cfg.benchmark
-    return [
-        Cell(scenario, method, int(seed), tuple(cell_overrides(b, scenario, method, seed)))
+
+    def cell(scenario: str, method: str, seed: int) -> Cell:
+        return Cell(scenario, method, int(seed), tuple(cell_overrides(b, scenario, method, seed)))
+
+    cells = [
+        cell(scenario, method, seed)
         for seed in b.seeds
         for scenario in b.scenarios
         for method in b.methods
     ]
+    extra = b.extra_seeds or {}
+    wanted = {
+        (scenario, method): {int(s) for s in seeds}
+        for scenario, by_method in extra.items()
+        for method, seeds in by_method.items()
+    }
+    for seed in sorted(set().union(*wanted.values()) if wanted else ()):
+        cells += [
+            cell(scenario, method, seed)
+            for scenario in b.scenarios
+            for method in b.methods
+            if seed in wanted.get((scenario, method), ())
+        ]
+    return cells
 
 
 def bench_config(data: Mapping[str, Any]) -> BenchConfig:
-    """Plain composed data of ``conf/bench.yaml`` → :class:`BenchConfig` (not yet validated)."""
+    """Plain composed data of ``conf/bench.yaml`` → :class:`BenchConfig` (not yet validated;
+    a ``benchmark.target`` mapping becomes a :class:`BenchmarkTargetConfig` there)."""
     values = dict(data)
     benchmark = BenchmarkConfig(**dict(values.pop("benchmark")))
     return BenchConfig(benchmark=benchmark, **values)
@@ -167,7 +188,9 @@ def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:
 
 
 #: Fields of a benchmark that decide its runs: an out_dir holds runs of one set of them.
-RUN_FIELDS = ("experiment", "overrides", "scenarios", "methods", "budgets", "seeds")
+RUN_FIELDS = (
+    "experiment", "overrides", "scenarios", "methods", "budgets", "seeds", "extra_seeds",
+)  # fmt: skip
 
 
 def manifest(cfg: BenchConfig) -> dict[str, Any]:

@@ -53,13 +53,19 @@ def write_plots(
         prefix = f"leaderboard_{scenario}_"
         scenario_rows = [r for r in rows if r["scenario"] == scenario]
         n_runs = {m: by_method[m]["control_cost"]["n"] for m in by_method}
+        # the seeds of each method's complete runs (extra_seeds: methods may differ in n)
+        seeds_of = {
+            m: sorted({int(r["seed"]) for r in scenario_rows if r["method"] == m})
+            for m in by_method
+        }
 
         def raw(method: str, seed: int, scenario: str = scenario) -> dict | None:
             return load_raw_evaluation(Cell(scenario, method, seed, ()).directory(cfg.out_dir))
 
         # 1. error traces of the trace methods, same scenario and seed
         pair = [m for m in b.trace_methods if m in by_method]
-        for seed in b.seeds:
+        common = set.intersection(*(set(seeds_of[m]) for m in pair)) if pair else set()
+        for seed in sorted(common):
             traces = {m: raw(m, seed) for m in pair}
             if pair and all(t is not None and "gap_error_abs_m" in t for t in traces.values()):
                 interval = float(next(iter(traces.values()))["interval_s"])
@@ -102,7 +108,7 @@ def write_plots(
         interval_s = None
         for method in by_method:
             pooled = []
-            for seed in b.seeds:
+            for seed in seeds_of[method]:
                 data = raw(method, seed)
                 if data is not None and "cam_latency_ms" in data:
                     pooled.append(data["cam_latency_ms"])
@@ -152,7 +158,8 @@ def write_plots(
         curves: dict[str, list[Path]] = {}
         for method in by_method:
             files = [
-                Cell(scenario, method, s, ()).directory(cfg.out_dir) / METRICS_FILE for s in b.seeds
+                Cell(scenario, method, s, ()).directory(cfg.out_dir) / METRICS_FILE
+                for s in seeds_of[method]
             ]
             files = [f for f in files if f.is_file()]
             rra_learned = any(

@@ -33,10 +33,12 @@ from vdtn_marl.leaderboard.stats import (
     collect_runs,
     describe_interval,
     iqm_interval,
+    is_extra_run,
     marl_eval_data,
     paired_differences,
     statistics,
 )
+from vdtn_marl.leaderboard.target import check_target, target_markdown
 from vdtn_marl.results import is_finite
 from vdtn_marl.runs import (
     atomic_write_json,
@@ -92,7 +94,7 @@ def _budget_lines(
         f"control intervals ({e['eval_intervals'] * 0.05:g} s) per run, the same scenarios for "
         "every method (evaluation seed = run seed + 10⁹)",
         f"- **seeds**: {', '.join(str(s) for s in b.seeds)} ({len(b.seeds)} runs per scenario "
-        "× method)",
+        "× method)" + _extra_seeds_text(cfg),
         _traces_line(composed),
     ]
     if seconds:
@@ -103,6 +105,28 @@ def _budget_lines(
             f"{os.cpu_count()} CPU cores"
         )
     return lines
+
+
+def _extra_seeds_text(cfg: BenchConfig) -> str:
+    """The extra seeds' part of the seeds line (empty without ``benchmark.extra_seeds``)."""
+    parts = []
+    for scenario, by_method in (cfg.benchmark.extra_seeds or {}).items():
+        groups: dict[tuple[int, ...], list[str]] = {}
+        for method, seeds in by_method.items():
+            if seeds:
+                groups.setdefault(tuple(int(s) for s in seeds), []).append(method)
+        if groups:
+            text = "; ".join(
+                f"{', '.join(methods)}: {', '.join(str(s) for s in seeds)}"
+                for seeds, methods in groups.items()
+            )
+            parts.append(f"{scenario} — {text}")
+    if not parts:
+        return ""
+    return (
+        "; extra seeds (these cells have more runs, paired differences use the seeds both "
+        "methods have): " + "; ".join(parts)
+    )
 
 
 def _traces_line(composed: Mapping) -> str:
@@ -177,6 +201,8 @@ def _markdown(
     n_cells: int,
     n_done: int,
     dropped: Sequence[str],
+    target: Mapping[str, Any] | None = None,
+    marl_eval_left_out: int = 0,
 ) -> str:
     b = cfg.benchmark
     table_metrics = [m for m in METRICS if m.table]
@@ -212,6 +238,8 @@ def _markdown(
             f"- **incomplete**: {n_done} of {n_cells} runs are complete; rerun the command to "
             "finish the others"
         )
+    if target is not None:
+        lines += ["", *target_markdown(target)]
     lines += [
         "",
         "## Methods",
@@ -313,6 +341,11 @@ def _markdown(
     ]
     if dropped:
         lines[-1] += f" (left out, not finite in every run: {', '.join(dropped)})"
+    if marl_eval_left_out:
+        lines[-1] += (
+            f"; the {marl_eval_left_out} run(s) of `extra_seeds` are left out, since marl-eval "
+            "needs the same runs for every task and algorithm (they are in the other files)"
+        )
     return "\n".join(lines) + "\n"
 
 
@@ -340,6 +373,8 @@ def write_report(
     paired = paired_differences(rows, b)
     plots = write_plots(cfg, rows, stats, report_dir)
     marl_eval, dropped = marl_eval_data(rows, b)
+    marl_eval_left_out = sum(is_extra_run(r, b) for r in rows)
+    target = check_target(rows, b)
     ci = describe_interval(b.interval, b.confidence, b.bootstrap_resamples)
     fallbacks = _bca_fallbacks(stats, paired)
     header = {
@@ -375,6 +410,7 @@ def write_report(
             },
             "statistics": stats,
             "paired_differences": paired,
+            **({"target": target} if target is not None else {}),
             "runs": rows,
         },
     )
@@ -401,7 +437,18 @@ def write_report(
     written["markdown"] = atomic_write_text(
         report_dir / REPORT_FILE,
         _markdown(
-            cfg, rows, stats, paired, plots, command, composed, len(cells), len(rows), dropped
+            cfg,
+            rows,
+            stats,
+            paired,
+            plots,
+            command,
+            composed,
+            len(cells),
+            len(rows),
+            dropped,
+            target,
+            marl_eval_left_out,
         ),
     )
     for scenario, kinds in plots.items():
@@ -444,3 +491,11 @@ def print_leaderboard(path: str | Path, console: Any = None) -> None:
                 )
             table.add_row(*cells)
         console.print(table)
+    target = data.get("target")
+    if target:
+        console.print(
+            f"target ({target['method']} against {target['reference']} on "
+            f"{target['scenario']}): {target['status']}"
+        )
+        for c in target["criteria"]:
+            console.print(f"  {c['label']} ({c['requirement']}, n = {c['n']}): {c['verdict']}")

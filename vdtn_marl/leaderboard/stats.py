@@ -279,11 +279,12 @@ def statistics(
 def paired_differences(
     rows: Sequence[Mapping[str, Any]], benchmark: BenchmarkConfig
 ) -> dict[str, dict[str, Any]]:
-    """``{scenario: {"a", "b", "differences": {metric: aggregate(a − b)}}}`` for the two
-    ``trace_methods``: per seed, both methods were evaluated on the same held-out scenarios, so
-    the difference of a metric is paired by seed and its interval (``benchmark.interval``, a
-    one-sample interval of the n differences) leaves out the spread between the seeds'
-    scenario sets."""
+    """``{scenario: {"a", "b", "seeds", "differences": {metric: aggregate(a − b)}}}`` for the
+    two ``trace_methods``: per seed, both methods were evaluated on the same held-out
+    scenarios, so the difference of a metric is paired by seed and its interval
+    (``benchmark.interval``, a one-sample interval of the n differences) leaves out the spread
+    between the seeds' scenario sets. Only the seeds both methods have are paired (with
+    ``extra_seeds`` one method may have more runs)."""
     if len(benchmark.trace_methods) != 2:
         return {}
     a, b = benchmark.trace_methods
@@ -326,6 +327,12 @@ def best_methods(stats: Mapping[str, Mapping[str, Any]], metric: Metric) -> set[
 # --- exports --------------------------------------------------------------------------------
 
 
+def is_extra_run(row: Mapping[str, Any], benchmark: BenchmarkConfig) -> bool:
+    """Whether a run is one of ``benchmark.extra_seeds`` (not of ``benchmark.seeds``)."""
+    extra = (benchmark.extra_seeds or {}).get(row["scenario"], {}).get(row["method"], [])
+    return int(row["seed"]) in {int(s) for s in extra}
+
+
 def marl_eval_data(
     rows: Sequence[Mapping[str, Any]], benchmark: BenchmarkConfig
 ) -> tuple[dict, list[str]]:
@@ -336,7 +343,10 @@ def marl_eval_data(
     total PPO iterations; every metric is a one-element list (a value over all evaluation
     episodes). marl-eval needs the same metrics in every run: a metric that is not finite in
     some run (CAM latency of a run that delivered no CAM) is left out; the second value lists
-    those."""
+    those. It needs the same runs in every task and algorithm too, so only the runs of
+    ``benchmark.seeds`` are exported (those of ``extra_seeds`` are left out,
+    :func:`is_extra_run`)."""
+    rows = [r for r in rows if not is_extra_run(r, benchmark)]
     keys = [m.key for m in METRICS]
     dropped = sorted(k for k in keys if any(not is_finite(r.get(k)) for r in rows))
     keys = [k for k in keys if k not in dropped]
