@@ -90,6 +90,10 @@ def test_wheel_ships_every_config(installed):
     cycles = {f"vdtn_marl/data/cycles/{p.name}" for p in (ROOT / "vdtn_marl/data/cycles").glob("*")}
     assert cycles == {"vdtn_marl/data/cycles/udds.csv", "vdtn_marl/data/cycles/hwfet.csv"}
     assert cycles <= names, sorted(cycles - names)
+    drives = {f"vdtn_marl/data/drives/{p.name}" for p in (ROOT / "vdtn_marl/data/drives").glob("*")}
+    assert {f"vdtn_marl/data/drives/{n}" for n in ("LICENSE", "NOTICE", "README.md")} <= drives
+    assert len([n for n in drives if n.endswith(".csv")]) == 22
+    assert drives <= names, sorted(drives - names)
 
 
 def test_installed_package_comes_from_the_wheel(installed):

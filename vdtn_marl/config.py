@@ -42,6 +42,9 @@ class ScenarioConfig:
     episode_intervals: int = 200  # 10 s at Δt = 50 ms
     traces: str = TwinParams.traces  # a registered leader trace set (the EPA city cycle)
     trace_path: str | None = None  # a user's trace file (NGSIM, highD, time/speed CSV)
+    # how evaluation cuts windows out of a recorded eval part: random (independent, may overlap)
+    # or disjoint (non-overlapping, order set by the seed; refused when there are too few)
+    eval_windows: str = "random"
     model: dict[str, Any] = field(default_factory=dict)
 
     def model_kwargs(self) -> dict[str, Any]:
@@ -306,9 +309,15 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive_int("threads", cfg.threads, low=0, high=1024)
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)
-    from vdtn_marl.data.selection import check_trace_settings
+    from vdtn_marl.data.selection import EVAL_WINDOWS, check_eval_windows, check_trace_settings
 
     check_trace_settings(s.traces, s.trace_path)
+    _choice("scenario.eval_windows", s.eval_windows, EVAL_WINDOWS)
+    p = cfg.twin_params()
+    check_eval_windows(
+        s.traces, s.trace_path, s.eval_windows, episodes=e.eval_episodes,
+        episode_intervals=p.episode_intervals, control_interval_s=p.platoon.control_interval_s,
+    )  # fmt: skip
     if e.eval_intervals > s.episode_intervals:
         raise ConfigError(
             f"experiment.eval_intervals={e.eval_intervals!r} must be <= "

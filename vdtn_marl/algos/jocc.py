@@ -130,8 +130,8 @@ def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]
 
     scenario = cfg.scenario
     if scenario.trace_path is None:
-        return named_sources(scenario.traces)
-    return file_sources(scenario.traces, scenario.trace_path)
+        return named_sources(scenario.traces, scenario.eval_windows)
+    return file_sources(scenario.traces, scenario.trace_path, scenario.eval_windows)
 
 
 class JointOptimisation:

@@ -1,11 +1,13 @@
 """Leader speed traces for the digital twin (docs/model.md §3).
 
-Named trace sets (:func:`get_trace_source`): ``"synthetic"``, ``"constant"``, and the standard
-EPA driving cycles ``"udds"`` and ``"hwfet"`` (bundled, :mod:`vdtn_marl.data.cycles`).
+Named trace sets (:func:`get_trace_source`): ``"synthetic"``, ``"constant"``, the standard
+EPA driving cycles ``"udds"`` and ``"hwfet"`` (bundled, :mod:`vdtn_marl.data.cycles`), and
+``"cmap"``, recorded drives of 22 vehicles around Chicago (bundled, :mod:`vdtn_marl.data.cmap`).
 Recorded data the user has (NGSIM, highD-style tracks, ``time,speed`` CSV) is read with
 :func:`load_trace_source` / :class:`NGSIMTraceSource`.
 """
 
+from vdtn_marl.data.cmap import cmap_info, cmap_source, load_cmap_profiles
 from vdtn_marl.data.cycles import (
     CYCLES,
     driving_cycle_info,
@@ -29,8 +31,10 @@ from vdtn_marl.data.preprocess import (
 )
 from vdtn_marl.data.profiles import (
     SPLIT_VERSION,
+    DisjointWindowSource,
     NGSIMTraceSource,
     ProfileTraceSource,
+    TooFewWindowsError,
     load_profiles,
     load_trace_source,
     load_train_eval_sources,
@@ -56,6 +60,7 @@ def _register_cycles() -> None:
 
 
 _register_cycles()
+register_trace_source("cmap", cmap_source, cmap_info())
 
 __all__ = [
     "CYCLES",
@@ -63,6 +68,7 @@ __all__ = [
     "MAX_SPEED_MPS",
     "SPLIT_VERSION",
     "ConstantSpeedTraceSource",
+    "DisjointWindowSource",
     "NGSIMTraceSource",
     "PreprocessReport",
     "ProfileTraceSource",
@@ -70,11 +76,15 @@ __all__ = [
     "SyntheticTraceSource",
     "TraceFormatError",
     "TraceInfo",
+    "TooFewWindowsError",
     "TraceSource",
+    "cmap_info",
+    "cmap_source",
     "driving_cycle_info",
     "driving_cycle_source",
     "get_trace_source",
     "limit_acceleration",
+    "load_cmap_profiles",
     "load_driving_cycle",
     "load_highd",
     "load_ngsim",

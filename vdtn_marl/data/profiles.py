@@ -1,8 +1,9 @@
 """Recorded speed profiles as a :class:`~vdtn_marl.data.traces.TraceSource`, and the split rule.
 
 :class:`ProfileTraceSource` cuts random windows out of a fixed list of
-:class:`~vdtn_marl.data.loaders.SpeedProfile`; :func:`split` divides profiles into a train and
-an eval part by a fixed, versioned rule; :func:`load_trace_source` builds a source from a file.
+:class:`~vdtn_marl.data.loaders.SpeedProfile`; :class:`DisjointWindowSource` hands out
+non-overlapping windows of one instead; :func:`split` divides profiles into a train and an eval
+part by a fixed, versioned rule; :func:`load_trace_source` builds a source from a file.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from __future__ import annotations
 import hashlib
 import inspect
 import re
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import Any, Literal
@@ -83,6 +84,11 @@ class ProfileTraceSource:
     naming the longest profile; ``too_short="reflect"`` instead makes every profile usable by
     playing it forward, then backward, then forward again… (speed stays continuous; the
     acceleration changes sign at each turn), with the offset drawn over one period.
+
+    ``eval_vehicles`` (split keys, :func:`split_key`) marks a recorded set whose runs split it
+    by vehicle, these vehicles evaluating and the others training
+    (:func:`vehicle_split_sources`); ``None`` (default): runs split it in time
+    (:func:`time_split_sources`).
     """
 
     def __init__(
@@ -91,6 +97,7 @@ class ProfileTraceSource:
         info: TraceInfo | None = None,
         *,
         too_short: TooShort = "raise",
+        eval_vehicles: Iterable[str] | None = None,
     ) -> None:
         if too_short not in ("raise", "reflect"):
             raise ValueError(f"too_short={too_short!r} must be 'raise' or 'reflect'")
@@ -107,6 +114,7 @@ class ProfileTraceSource:
                 raise ValueError(f"profile {p.vehicle_id!r} has negative speeds")
         self.profiles = usable
         self.too_short = too_short
+        self.eval_vehicles = None if eval_vehicles is None else frozenset(eval_vehicles)
         self._times = [p.time_s - p.time_s[0] for p in usable]
         self._durations = np.array([p.duration_s for p in usable])
         self.info = info or TraceInfo(
@@ -288,6 +296,125 @@ def time_split_sources(
         profiles = [time_split(p, part) for p in source.profiles]
         parts.append(ProfileTraceSource(profiles, info, too_short=source.too_short))
     return parts[0], parts[1]
+
+
+def vehicle_split_sources(
+    source: ProfileTraceSource,
+) -> tuple[ProfileTraceSource, ProfileTraceSource]:
+    """Training and evaluation sources of a recorded trace set split by vehicle: the profiles
+    of ``source.eval_vehicles`` (matched by :func:`split_key`, so every segment of a vehicle
+    lands in the same part) evaluate, the others train. No stretch of road driven by an
+    evaluation vehicle is ever drawn in training."""
+    chosen = source.eval_vehicles
+    if not chosen:
+        raise ValueError(f"trace set {source.info.name!r} has no evaluation vehicles")
+    keys = {split_key(p.vehicle_id) for p in source.profiles}
+    if not chosen <= keys or chosen == keys:
+        raise ValueError(
+            f"trace set {source.info.name!r}: the evaluation vehicles must be some, not all, of "
+            f"its vehicles; unknown: {', '.join(sorted(chosen - keys)) or 'none'}"
+        )
+    parts = []
+    for part in ("train", "eval"):
+        profiles = [
+            p for p in source.profiles if (split_key(p.vehicle_id) in chosen) == (part == "eval")
+        ]
+        vehicles = len({split_key(p.vehicle_id) for p in profiles})
+        how = f"split by vehicle: {vehicles} of {len(keys)} vehicles, {len(profiles)} segments"
+        info = replace(source.info, description=f"{source.info.description} (part={part}, {how})")
+        parts.append(ProfileTraceSource(profiles, info, too_short=source.too_short))
+    return parts[0], parts[1]
+
+
+class TooFewWindowsError(ValueError):
+    """A :class:`DisjointWindowSource` asked for more windows than its profiles hold."""
+
+    def __init__(self, message: str, available: int, needed: int) -> None:
+        super().__init__(message)
+        self.available = available
+        self.needed = needed
+
+
+class DisjointWindowSource:
+    """Non-overlapping windows of a :class:`ProfileTraceSource`, in an order set by the seed.
+
+    Each profile of duration ``d`` is tiled with ``n = ⌊(d − span) / stride⌋ + 1`` windows of
+    ``span = (num_points − 1)·dt_s`` seconds, one ``stride = num_points·dt_s`` apart (so no
+    two share a sample), shifted together by a drawn fraction of what the tiling leaves over
+    at the profile's end; the windows of all profiles are then put in a drawn order
+    (``torch.randperm``) and a call returns the first ``num_traces``. All draws come from the
+    caller's generator, so a seed fixes the windows and their order. The windows of one call
+    never overlap (an evaluation draws all its scenarios in one call); separate calls may
+    hand out the same stretch again. Asking for more windows than there are raises
+    :class:`TooFewWindowsError`, naming how many are available and how many are needed.
+    """
+
+    def __init__(self, source: ProfileTraceSource) -> None:
+        if not isinstance(source, ProfileTraceSource):
+            raise TypeError(f"DisjointWindowSource needs a ProfileTraceSource, got {source!r}")
+        self.source = source
+        self.profiles = source.profiles
+        desc = source.info.description
+        if "random windows" in desc:
+            desc = desc.replace("random windows", "disjoint windows")
+        else:
+            desc = f"{desc}, disjoint windows"
+        self.info = replace(source.info, description=desc)
+
+    def __len__(self) -> int:
+        return len(self.source)
+
+    def windows_per_profile(self, num_points: int, dt_s: float) -> np.ndarray:
+        """How many disjoint windows of ``num_points`` points at step ``dt_s`` each profile
+        holds (see the class doc)."""
+        if num_points < 2 or not dt_s > 0:
+            raise ValueError(f"num_points={num_points} and dt_s={dt_s} must be >= 2 and > 0")
+        span, stride = (num_points - 1) * dt_s, num_points * dt_s
+        durations = self.source._durations
+        fits = durations >= span - 1e-9
+        counts = np.floor((durations - span) / stride + 1e-9).astype(np.int64) + 1
+        return np.where(fits, counts, 0)
+
+    def count(self, num_points: int, dt_s: float) -> int:
+        """How many disjoint windows of ``num_points`` points at step ``dt_s`` there are."""
+        return int(self.windows_per_profile(num_points, dt_s).sum())
+
+    def sample(
+        self, num_traces: int, num_points: int, dt_s: float, generator: torch.Generator
+    ) -> torch.Tensor:
+        if num_traces < 1 or num_points < 2 or not dt_s > 0:
+            raise ValueError(
+                f"num_traces={num_traces}, num_points={num_points}, dt_s={dt_s} must be "
+                ">= 1, >= 2 and > 0"
+            )
+        counts = self.windows_per_profile(num_points, dt_s)
+        total = int(counts.sum())
+        span, stride = (num_points - 1) * dt_s, num_points * dt_s
+        if total < num_traces:
+            durations = self.source._durations
+            raise TooFewWindowsError(
+                f"trace set {self.info.name!r}: {total} disjoint windows of {span:g} s "
+                f"({num_points} points at dt {dt_s:g} s) available in its {len(durations)} "
+                f"profiles ({durations.sum():.0f} s), {num_traces} needed; use fewer or shorter "
+                "episodes, more data, or random (overlapping) windows",
+                available=total,
+                needed=num_traces,
+            )
+        dev = generator.device
+        shift = torch.rand(len(counts), generator=generator, device=dev, dtype=torch.float64)
+        order = torch.randperm(total, generator=generator, device=dev)[:num_traces]
+        profile_of = np.repeat(np.arange(len(counts)), counts)
+        index_in = np.arange(total) - np.repeat(np.cumsum(counts) - counts, counts)
+        leftover = np.maximum(self.source._durations - span - (counts - 1) * stride, 0.0)
+        offsets = shift.cpu().numpy() * leftover
+        grid = dt_s * np.arange(num_points)
+        out = np.empty((num_traces, num_points))
+        for n, w in enumerate(order.cpu().numpy()):
+            i = int(profile_of[w])
+            t = offsets[i] + index_in[w] * stride + grid
+            t = np.minimum(t, self.source._durations[i])
+            out[n] = np.interp(t, self.source._times[i], self.profiles[i].speed_mps)
+        return torch.as_tensor(out, dtype=torch.get_default_dtype()).to(dev)
 
 
 def train_eval_parts(

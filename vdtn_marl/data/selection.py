@@ -3,10 +3,18 @@ front, and the training and evaluation sources they select.
 
 A generated trace set (``synthetic``, ``constant``) serves training and evaluation alike
 (their scenarios are seeded apart, so evaluation draws traces training never saw); a recorded
-one (``udds``, ``hwfet``: one drive each) is split in time, its first 80 % for training and
-its last 20 % for evaluation (:func:`named_sources`); a user's file
-(``scenario.traces=csv|highd|ngsim`` with ``scenario.trace_path``) is read once and divided
-into a train and an eval part (:func:`~vdtn_marl.data.profiles.load_train_eval_sources`).
+one is split: ``udds`` and ``hwfet`` (one drive each) in time, their first 80 % for training
+and their last 20 % for evaluation, ``cmap`` (22 vehicles) by vehicle, a fixed list of
+households evaluating (:func:`named_sources`); a user's file (``scenario.traces=csv|highd|ngsim``
+with ``scenario.trace_path``) is read once and divided into a train and an eval part
+(:func:`~vdtn_marl.data.profiles.load_train_eval_sources`).
+
+``scenario.eval_windows`` chooses how evaluation cuts windows out of a recorded eval part:
+``random`` (default) draws each scenario's window independently, so windows may overlap;
+``disjoint`` hands out non-overlapping windows in an order set by the seed
+(:class:`~vdtn_marl.data.profiles.DisjointWindowSource`), and :func:`check_eval_windows`
+refuses the setting up front when the eval part holds too few. Generated sets draw independent
+traces either way.
 """
 
 from __future__ import annotations
@@ -16,15 +24,22 @@ from pathlib import Path
 
 from vdtn_marl.data.loaders import LOADERS
 from vdtn_marl.data.profiles import (
+    DisjointWindowSource,
     ProfileTraceSource,
     load_train_eval_sources,
     time_split_sources,
+    vehicle_split_sources,
 )
 from vdtn_marl.data.traces import TraceSource, get_trace_source, trace_source_names
 from vdtn_marl.sim.params import ConfigError
 
 FILE_FORMATS = tuple(sorted(LOADERS))
 """Values of ``scenario.traces`` that read ``scenario.trace_path``."""
+EVAL_WINDOWS = ("random", "disjoint")
+"""Values of ``scenario.eval_windows`` (:func:`eval_source`)."""
+EVAL_LOOKAHEAD_INTERVALS = 200
+"""Look-ahead of the evaluation twin beyond the episode, in control intervals (the default of
+:class:`~vdtn_marl.sim.twin.DigitalTwin`, which evaluation uses)."""
 
 
 def check_trace_settings(traces: str, trace_path: str | None) -> None:
@@ -55,32 +70,101 @@ def check_trace_settings(traces: str, trace_path: str | None) -> None:
 
 def split_in_time(name: str) -> bool:
     """Whether runs split the named trace set ``name`` in time (:func:`named_sources`): true
-    for a recorded set, false for a generated one."""
-    return isinstance(get_trace_source(name), ProfileTraceSource)
-
-
-def named_sources(name: str) -> tuple[str | TraceSource, str | TraceSource]:
-    """Training and evaluation sources of the named trace set ``name``: the name itself for
-    both when its traces are generated, the two time parts of a recorded set
-    (:func:`~vdtn_marl.data.profiles.time_split_sources`), which would otherwise evaluate on
-    windows of the drive it trained on."""
+    for a recorded set of one drive (``udds``, ``hwfet``), false for one split by vehicle
+    (``cmap``) and for a generated one."""
     source = get_trace_source(name)
-    if isinstance(source, ProfileTraceSource):
-        return time_split_sources(source)
-    return name, name
+    return isinstance(source, ProfileTraceSource) and not source.eval_vehicles
 
 
-def file_sources(kind: str, trace_path: str) -> tuple[ProfileTraceSource, ProfileTraceSource]:
+def named_sources(
+    name: str, eval_windows: str = "random"
+) -> tuple[str | TraceSource, str | TraceSource]:
+    """Training and evaluation sources of the named trace set ``name``: the name itself for
+    both when its traces are generated; for a recorded set, its two parts, by vehicle when it
+    names evaluation vehicles (``cmap``:
+    :func:`~vdtn_marl.data.profiles.vehicle_split_sources`) and otherwise in time
+    (:func:`~vdtn_marl.data.profiles.time_split_sources`), since evaluating on windows of the
+    drive it trained on would flatter the policy. ``eval_windows`` as in :func:`eval_source`."""
+    check_eval_windows_value(eval_windows)
+    source = get_trace_source(name)
+    if not isinstance(source, ProfileTraceSource):
+        return name, name
+    if source.eval_vehicles:
+        train, evaluation = vehicle_split_sources(source)
+    else:
+        train, evaluation = time_split_sources(source)
+    return train, eval_source(evaluation, eval_windows)
+
+
+def check_eval_windows_value(eval_windows: str) -> None:
+    if eval_windows not in EVAL_WINDOWS:
+        raise ConfigError(
+            f"scenario.eval_windows={eval_windows!r} is not allowed; choose one of "
+            f"{', '.join(EVAL_WINDOWS)}"
+        )
+
+
+def eval_source(source: str | TraceSource, eval_windows: str) -> str | TraceSource:
+    """The evaluation source for ``scenario.eval_windows``: ``source`` itself for ``random``
+    (or a generated set), its :class:`~vdtn_marl.data.profiles.DisjointWindowSource` for
+    ``disjoint``."""
+    check_eval_windows_value(eval_windows)
+    if eval_windows == "disjoint" and isinstance(source, ProfileTraceSource):
+        return DisjointWindowSource(source)
+    return source
+
+
+def check_eval_windows(
+    traces: str,
+    trace_path: str | None,
+    eval_windows: str,
+    *,
+    episodes: int,
+    episode_intervals: int,
+    control_interval_s: float,
+) -> None:
+    """Raise :class:`ConfigError` naming ``scenario.eval_windows`` when ``disjoint`` is asked
+    for and the eval part holds fewer disjoint windows of an episode and the look-ahead
+    (``episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS`` points) than the ``episodes`` that
+    evaluation draws; the message names both numbers. The trace settings must be valid
+    (:func:`check_trace_settings`)."""
+    check_eval_windows_value(eval_windows)
+    if eval_windows == "random":
+        return
+    if trace_path is None:
+        _, evaluation = named_sources(traces, eval_windows)
+    else:
+        _, evaluation = file_sources(traces, trace_path, eval_windows)
+    if not isinstance(evaluation, DisjointWindowSource):
+        return
+    num_points = episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS
+    available = evaluation.count(num_points, control_interval_s)
+    if available < episodes:
+        span = (num_points - 1) * control_interval_s
+        raise ConfigError(
+            f"scenario.eval_windows=disjoint: the eval part of scenario.traces={traces!r} holds "
+            f"{available} disjoint windows of {span:g} s (episode and look-ahead), "
+            f"experiment.eval_episodes={episodes} needed; use scenario.eval_windows=random, "
+            "fewer episodes or a larger trace set"
+        )
+
+
+def file_sources(
+    kind: str, trace_path: str, eval_windows: str = "random"
+) -> tuple[ProfileTraceSource, ProfileTraceSource | DisjointWindowSource]:
     """Training and evaluation sources of a user's trace file; :class:`ConfigError` naming
-    ``scenario.trace_path`` if it is missing or cannot be read as ``kind``."""
+    ``scenario.trace_path`` if it is missing or cannot be read as ``kind``. ``eval_windows``
+    as in :func:`eval_source`."""
+    check_eval_windows_value(eval_windows)
     path = Path(trace_path).expanduser()
     if not path.is_file():
         raise ConfigError(f"scenario.trace_path={trace_path!r} is not a file")
     stat = path.stat()
     try:
-        return _read(kind, str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        train, evaluation = _read(kind, str(path.resolve()), stat.st_mtime_ns, stat.st_size)
     except (ValueError, OSError) as exc:  # TraceFormatError is a ValueError
         raise ConfigError(f"scenario.trace_path={trace_path!r} ({kind}): {exc}") from None
+    return train, eval_source(evaluation, eval_windows)
 
 
 @lru_cache(maxsize=4)
