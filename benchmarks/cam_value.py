@@ -35,10 +35,58 @@ delivered with intervals whose CAM was lost compares such runs, not single deliv
 value is what an RRA agent would have to learn from; if the credit at the delivery interval is
 near zero or negative while the value is positive, the value shows up only in later
 intervals' ξ, after the RRA agent's discount has shrunk it.
-Writes ``benchmarks/results/cam_value.json`` atomically. Example (the committed JSON):
+
+**Credit reaching the carrying actions** (the ``credit`` entry of each run's ``result``).
+Per dropped CAM the script also keeps Δξ_{k+j}, j = 0..H−1 (H = ``--horizon``): ξ of the
+same follower i from the ``td`` estimator at interval k+j in the copy that kept the CAM minus
+in the copy that lost it (a copy's ξ is 0 after the interval of its collision; Δξ_k is the td
+credit), and the subframes t ∈ {0..T−1} of interval k in which link i transmitted the CAM
+(it still had bits to send at the subframe's start; the link is silent after delivery). For
+each RRA credit setting c of ``--credit`` (γ and GAE λ, each per 1 ms subframe or per control
+interval, applied as x^(1/T) per subframe; docs/model.md §5; the named settings of
+:data:`CREDIT_PRESETS` are ``legacy`` (both per subframe, ``algo.rra_credit=subframe``),
+``paper`` (the default: γ per interval, λ per subframe step), ``paper_long_gae`` (both per
+interval), and ``legacy_lambda1``, ``paper_lambda1`` with λ = 1) the weight with which ξ paid
+at the last subframe of interval k+j enters the GAE advantage of the action at subframe t of
+interval k is w_c(t, j) = (γ_s·λ_s)^((T−1−t) + j·T), γ_s and λ_s per subframe. With λ < 1 it
+is the part of the advantage carried by the sampled rewards; the rest comes from the critic's
+values, and with an exact critic the expected advantage is that of λ = 1 for any λ. The entry
+holds:
+
+- ``full_value``: Σ_j γ^j Δξ_{k+j}, γ = the run's control discount per interval (0.99), mean
+  with its 95% Student-t CI over CAMs, and the shares of its mean from j = 0
+  (``full_value_share_j0``) and from j ≥ 1 (``full_value_share_later``), ratios of means with
+  a percentile bootstrap CI over CAMs (``bootstrap_resamples``, seeded);
+- ``delta_xi_mean_by_j``: the mean Δξ_{k+j} per j; ``transmitting_subframes``: how many
+  subframes carried a CAM (mean and CI);
+- per setting (``settings``): its γ and λ with their scales, γ_s, λ_s, w(0, 0), w(0, 1);
+  ``credit``: per CAM the mean over its transmitting subframes t of Σ_j w_c(t, j)·Δξ_{k+j},
+  mean with its 95% CI over CAMs; ``credit_from_j0``: the same with j = 0 only;
+  ``share_of_full_value``: mean credit / mean full value, with its bootstrap CI over CAMs.
+
+``credit_no_collision`` is the same entry over the ``cams_no_collision`` CAMs after which
+neither copy collided within the horizon: a collision (its reward penalty and the end of the
+episode) moves ξ by tenths of a reward unit where a CAM otherwise moves it by thousandths, so
+a few CAMs can decide the means of ``credit``. With more than one checkpoint the JSON's
+``pooled`` entry holds both entries over the CAMs of every run together (``runs``, ``cams``,
+``cams_no_collision``). CAMs of the same scenario at different start intervals, and of
+different runs, are treated as independent in every CI.
+JSON files written before the ``credit`` entry existed (the committed ``cam_value.json``,
+``cam_value_greedy_rra.json``, ``cam_value_greedy_trained.json``) hold every other entry.
+
+Writes ``--output`` (default ``benchmarks/results/cam_value.json``) atomically, and its PNG
+next to it unless ``--no-plot``. The committed ``cam_value.json`` came from
 
     python benchmarks/cam_value.py \\
-        outputs/bench/reduced-v2.1/platoon4/jocc_k050/seed{0,1,2,3,4}/checkpoints/last.pt
+        outputs/bench/reduced-v2.3/platoon4/jocc_k050/seed{0,1,2,3,4}/checkpoints/last.pt \\
+        --episodes 128
+
+and ``benchmarks/results/cam_credit.json`` (docs/studies/2026-12-01-cam-credit.md), on the
+checkpoints of ``vdtn-marl jocc experiment=default seed=S
+hydra.run.dir=outputs/cam_credit/seedS`` for S = 0, 1, from
+
+    python benchmarks/cam_value.py outputs/cam_credit/seed{0,1}/checkpoints/last.pt \\
+        --episodes 2048 --no-progress --no-plot --output benchmarks/results/cam_credit.json
 """
 
 from __future__ import annotations
@@ -47,6 +95,7 @@ import argparse
 import copy
 import time
 from pathlib import Path
+from typing import NamedTuple
 
 import torch
 from rich.console import Console
@@ -98,10 +147,16 @@ class ActingSystem:
             again(base_rra, self.rra),
         )
 
-    def run_subframes(self) -> None:
+    def run_subframes(self) -> torch.Tensor:
+        """Run the interval's T subframes; [T, B, L] bool: link l still had bits of its CAM to
+        send at the start of subframe t (it transmitted then; a link is silent after
+        delivery)."""
         twin = self.twin
+        pending = []
         for _ in range(twin.subframes_per_interval):
-            twin.step_subframe(torch.as_tensor(self.rra(twin.rra_observation())).long())
+            action = torch.as_tensor(self.rra(twin.rra_observation())).long()
+            pending.append(torch.as_tensor(twin.step_subframe(action).was_pending))
+        return torch.stack(pending)
 
     def _decide(self, cams_lost: bool) -> torch.Tensor:
         observation = self.twin.vehicle_observation(False, cams_lost=cams_lost)
@@ -117,21 +172,208 @@ class ActingSystem:
 
 
 def discounted_platoon_return(
-    system: ActingSystem, first: IntervalRecord, horizon: int, gamma: float
-) -> torch.Tensor:
+    system: ActingSystem,
+    first: IntervalRecord,
+    horizon: int,
+    gamma: float,
+    estimator=None,
+    first_xi: torch.Tensor | None = None,
+) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor]:
     """Σ_h γ^h Σ_i r_i over ``horizon`` intervals from ``first`` (already run), [B] float64;
-    a collision ends a scenario's sum after its interval."""
+    a collision ends a scenario's sum after its interval. With ``estimator`` also ξ of every
+    follower at each of the ``horizon`` intervals, [horizon, B, F] float64 (``first_xi`` at
+    the first, already computed), 0 after the interval of a collision (the episode ended),
+    else None. Third: [B] bool, no collision in the ``horizon`` intervals."""
     total = first.reward.double().sum(-1)
     alive = ~first.collided.any(-1)
+    xi = None
+    if estimator is not None:
+        start = first_xi if first_xi is not None else estimator(system.twin, first)
+        xi = [start.double()]
     weight = gamma
     for _ in range(1, horizon):
         system.begin()
         system.run_subframes()
         record = system.finish()
         total += weight * alive.double() * record.reward.double().sum(-1)
+        if xi is not None:
+            xi.append(alive.double()[:, None] * estimator(system.twin, record).double())
         alive &= ~record.collided.any(-1)
         weight *= gamma
-    return total
+    return total, (torch.stack(xi) if xi is not None else None), alive
+
+
+# ---------------------------------------------------------------------- credit to the carriers
+CREDIT_SCALES = ("subframe", "interval")
+BOOTSTRAP_RESAMPLES = 10_000
+
+
+class CreditSetting(NamedTuple):
+    """How the RRA trainer discounts: γ per ``gamma_scale`` and GAE λ per ``lmbda_scale``
+    (``subframe``: as given, per 1 ms subframe; ``interval``: per control interval, applied
+    as γ^(1/T) or λ^(1/T) per subframe)."""
+
+    name: str
+    gamma: float
+    gamma_scale: str
+    lmbda: float
+    lmbda_scale: str
+
+    @property
+    def description(self) -> str:
+        return f"γ {self.gamma:g}/{self.gamma_scale}, λ {self.lmbda:g}/{self.lmbda_scale}"
+
+    def per_subframe(self, subframes_per_interval: int) -> tuple[float, float]:
+        root = 1.0 / subframes_per_interval
+        gamma = self.gamma**root if self.gamma_scale == "interval" else self.gamma
+        lmbda = self.lmbda**root if self.lmbda_scale == "interval" else self.lmbda
+        return gamma, lmbda
+
+
+#: Named settings: the RRA learning problems of ``benchmarks/ivoi_noise.py`` (``legacy``:
+#: ``algo.rra_credit=subframe``, the setting before model v1; ``paper``: the default,
+#: ``algo.rra_credit=interval`` with λ per subframe step; ``paper_long_gae``: λ per interval
+#: too) and their λ = 1 forms (the advantage an exact critic gives, for any λ).
+CREDIT_PRESETS = {
+    setting.name: setting
+    for setting in (
+        CreditSetting("legacy", 0.99, "subframe", 0.95, "subframe"),
+        CreditSetting("paper", 0.99, "interval", 0.95, "subframe"),
+        CreditSetting("paper_long_gae", 0.99, "interval", 0.95, "interval"),
+        CreditSetting("legacy_lambda1", 0.99, "subframe", 1.0, "subframe"),
+        CreditSetting("paper_lambda1", 0.99, "interval", 1.0, "subframe"),
+    )
+}
+DEFAULT_CREDITS = ",".join(CREDIT_PRESETS)
+
+
+def parse_credits(text: str) -> list[CreditSetting]:
+    """``SETTING,...``: names of :data:`CREDIT_PRESETS`, or ``GAMMA:SCALE:LAMBDA:SCALE``
+    (SCALE ``subframe`` or ``interval``) → settings."""
+    settings = []
+    for part in (p.strip() for p in text.split(",")):
+        if part in CREDIT_PRESETS:
+            settings.append(CREDIT_PRESETS[part])
+            continue
+        fields = part.split(":")
+        try:
+            if len(fields) != 4 or fields[1] not in CREDIT_SCALES or fields[3] not in CREDIT_SCALES:
+                raise ValueError
+            setting = CreditSetting(part, float(fields[0]), fields[1], float(fields[2]), fields[3])
+            if not (0.0 < setting.gamma <= 1.0 and 0.0 <= setting.lmbda <= 1.0):
+                raise ValueError
+        except ValueError as err:
+            raise SystemExit(
+                f"--credit {text!r}: {part!r} is neither one of {', '.join(CREDIT_PRESETS)} "
+                f"nor GAMMA:SCALE:LAMBDA:SCALE with SCALE one of {', '.join(CREDIT_SCALES)}, "
+                "GAMMA in (0, 1] and LAMBDA in [0, 1]"
+            ) from err
+        settings.append(setting)
+    return settings
+
+
+def gae_weights(setting: CreditSetting, subframes_per_interval: int, horizon: int) -> torch.Tensor:
+    """[T, H] float64: w(t, j) = (γ_s·λ_s)^((T−1−t) + j·T), the weight with which the reward
+    paid at the last subframe of interval k+j enters the GAE advantage of the action at
+    subframe t of interval k (γ_s, λ_s per subframe)."""
+    gamma, lmbda = setting.per_subframe(subframes_per_interval)
+    t = torch.arange(subframes_per_interval, dtype=torch.float64)[:, None]
+    j = torch.arange(horizon, dtype=torch.float64)[None, :]
+    steps = (subframes_per_interval - 1 - t) + j * subframes_per_interval
+    return torch.as_tensor(gamma * lmbda, dtype=torch.float64) ** steps
+
+
+def credit_to_carriers(
+    weights: torch.Tensor, transmitting: torch.Tensor, delta_xi: torch.Tensor
+) -> torch.Tensor:
+    """Per CAM [n]: mean over the subframes t in which its link transmitted it
+    (``transmitting`` [n, T] bool) of Σ_j w(t, j)·Δξ_{k+j} (``weights`` [T, H], ``delta_xi``
+    [n, H])."""
+    per_subframe = delta_xi.double() @ weights.T  # [n, T]
+    mask = transmitting.double()
+    return (per_subframe * mask).sum(-1) / mask.sum(-1)
+
+
+def discounted_sum(delta_xi: torch.Tensor, gamma: float) -> torch.Tensor:
+    """Σ_j γ^j Δξ_{k+j} per CAM, [n] (``delta_xi`` [n, H])."""
+    horizon = delta_xi.shape[-1]
+    powers = torch.as_tensor(gamma, dtype=torch.float64) ** torch.arange(
+        horizon, dtype=torch.float64
+    )
+    return delta_xi.double() @ powers
+
+
+def ratio_of_means(
+    numerator: torch.Tensor,
+    denominator: torch.Tensor,
+    resamples: int = BOOTSTRAP_RESAMPLES,
+    seed: int = 0,
+    confidence: float = 0.95,
+) -> dict[str, float | int]:
+    """mean(numerator) / mean(denominator) over paired samples [n], with a percentile
+    bootstrap CI that resamples the pairs (seeded)."""
+    num, den = numerator.double().reshape(-1), denominator.double().reshape(-1)
+    n = num.numel()
+    ratio = float(num.mean() / den.mean()) if n else float("nan")
+    if n < 2:
+        return {"ratio": ratio, "low": float("nan"), "high": float("nan"), "n": n}
+    generator = torch.Generator().manual_seed(seed)
+    draws = []
+    for begin in range(0, resamples, 1000):
+        index = torch.randint(n, (min(1000, resamples - begin), n), generator=generator)
+        draws.append(num[index].mean(-1) / den[index].mean(-1))
+    draws = torch.cat(draws)
+    tail = (1.0 - confidence) / 2
+    low, high = torch.quantile(draws, torch.tensor([tail, 1.0 - tail], dtype=torch.float64))
+    return {"ratio": ratio, "low": float(low), "high": float(high), "n": n}
+
+
+def credit_summary(
+    delta_xi: torch.Tensor,
+    transmitting: torch.Tensor,
+    settings: list[CreditSetting],
+    gamma_interval: float,
+    subframes_per_interval: int,
+) -> dict:
+    """The ``credit`` entry of a run (see the module doc) from Δξ [n, H] and the transmitting
+    subframes [n, T] of the n dropped CAMs."""
+    horizon = delta_xi.shape[-1]
+    full = discounted_sum(delta_xi, gamma_interval)
+    first = delta_xi[:, 0].double()
+    rows = []
+    for setting in settings:
+        weights = gae_weights(setting, subframes_per_interval, horizon)
+        credit = credit_to_carriers(weights, transmitting, delta_xi)
+        from_first = credit_to_carriers(weights[:, :1], transmitting, delta_xi[:, :1])
+        gamma_s, lmbda_s = setting.per_subframe(subframes_per_interval)
+        rows.append(
+            {
+                "name": setting.name,
+                "gamma": setting.gamma,
+                "gamma_scale": setting.gamma_scale,
+                "lmbda": setting.lmbda,
+                "lmbda_scale": setting.lmbda_scale,
+                "gamma_per_subframe": gamma_s,
+                "lmbda_per_subframe": lmbda_s,
+                "weight_t0_j0": float(weights[0, 0]),
+                "weight_t0_j1": float(weights[0, 1]) if horizon > 1 else float("nan"),
+                "credit": ci_summary(credit),
+                "credit_from_j0": ci_summary(from_first),
+                "share_of_full_value": ratio_of_means(credit, full),
+            }
+        )
+    delta_mean = delta_xi.double().mean(0) if delta_xi.shape[0] else torch.zeros(horizon)
+    return {
+        "estimator": "td",
+        "gamma_interval": gamma_interval,
+        "subframes_per_interval": subframes_per_interval,
+        "full_value": ci_summary(full),
+        "full_value_share_j0": ratio_of_means(first, full),
+        "full_value_share_later": ratio_of_means(full - first, full),
+        "delta_xi_mean_by_j": [float(x) for x in delta_mean],
+        "transmitting_subframes": ci_summary(transmitting.double().sum(-1)),
+        "settings": rows,
+    }
 
 
 def _pick_one(in_time: torch.Tensor, generator: torch.Generator) -> torch.Tensor:
@@ -172,8 +414,14 @@ def measure(
     starts: list[int],
     horizon: int,
     show_progress: bool = True,
+    credits: list[CreditSetting] | None = None,
+    samples: list | None = None,
 ) -> dict:
-    """Per dropped CAM: value, td credit and one-step credit (see the module doc)."""
+    """Per dropped CAM: value, td credit and one-step credit, and Δξ over the horizon with the
+    subframes that carried it, summarised per setting of ``credits`` (see the module doc).
+    ``samples`` (a list) receives (Δξ [n, H], transmitting [n, T], no collision [n], γ, T)
+    for pooling."""
+    credits = parse_credits(DEFAULT_CREDITS) if credits is None else credits
     cfg, params = loop.cfg, loop.params
     seed = EVAL_SEED_OFFSET + cfg.seed
     twin = DigitalTwin(
@@ -196,14 +444,15 @@ def measure(
     )
     generator = torch.Generator().manual_seed(seed)
     alive = torch.ones(episodes, dtype=torch.bool, device=twin.device)
-    value, td_credit, one_step_credit = [], [], []
+    value, td_credit, one_step_credit, delta_xi, transmitting = [], [], [], [], []
+    no_collision = []
     in_time_history, alive_history = [], []
     last = max(starts)
     steps = track(range(last + 1), description="intervals", disable=not show_progress)
     for k in steps:
         if k > 0:
             main.begin()
-        main.run_subframes()
+        pending = main.run_subframes()
         in_time_history.append(twin.switch_subframe(perfect=False) < twin.subframes_per_interval)
         alive_history.append(alive.clone())
         if k in starts:
@@ -218,19 +467,32 @@ def measure(
             td_lost = td(lost.twin, record_lost)
             one_step_kept = one_step(kept.twin, record_kept)
             sampled = drop.any(-1)
-            value.append(
-                (
-                    discounted_platoon_return(kept, record_kept, horizon, loop.gamma)
-                    - discounted_platoon_return(lost, record_lost, horizon, loop.gamma)
-                )[sampled]
+            return_kept, xi_kept, alive_kept = discounted_platoon_return(
+                kept, record_kept, horizon, loop.gamma, td, td_kept
             )
+            return_lost, xi_lost, alive_lost = discounted_platoon_return(
+                lost, record_lost, horizon, loop.gamma, td, td_lost
+            )
+            no_collision.append((alive_kept & alive_lost)[sampled])
+            value.append((return_kept - return_lost)[sampled])
             td_credit.append((td_kept - td_lost)[drop].double())
             one_step_credit.append(one_step_kept[drop].double())
+            delta_xi.append((xi_kept - xi_lost).permute(1, 2, 0)[drop])  # [n, H]
+            carried = pending.to(drop.device).permute(1, 2, 0)[drop]  # [n, T]
+            delay = torch.as_tensor(twin.link_state.delay_subframes, device=drop.device)[drop]
+            if not torch.equal(carried.sum(-1), delay.to(carried.device).long()):
+                raise RuntimeError("transmitting subframes disagree with the CAM delivery delay")
+            transmitting.append(carried)
         record = main.finish()
         alive &= ~record.collided.any(-1)
     value_all = torch.cat(value).cpu()
     td_all = torch.cat(td_credit).cpu()
     one_all = torch.cat(one_step_credit).cpu()
+    delta_all, transmitting_all = torch.cat(delta_xi).cpu(), torch.cat(transmitting).cpu()
+    survived = torch.cat(no_collision).cpu()
+    subframes = twin.subframes_per_interval
+    if samples is not None:
+        samples.append((delta_all, transmitting_all, survived, loop.gamma, subframes))
     return {
         "rra": f"{cfg.rra.name} ({LEARNED})" if rra_name == LEARNED else rra_name,
         "cams": int(value_all.numel()),
@@ -241,6 +503,30 @@ def measure(
         "value_sd": float(value_all.std()) if value_all.numel() > 1 else float("nan"),
         "delivery": delivery_persistence(
             torch.stack(in_time_history).cpu(), torch.stack(alive_history).cpu()
+        ),
+        "credit": credit_summary(delta_all, transmitting_all, credits, loop.gamma, subframes),
+        "cams_no_collision": int(survived.sum()),
+        "credit_no_collision": credit_summary(
+            delta_all[survived], transmitting_all[survived], credits, loop.gamma, subframes
+        ),
+    }
+
+
+def pooled_credit(samples: list, credits: list[CreditSetting]) -> dict | None:
+    """The ``credit`` and ``credit_no_collision`` entries over the CAMs of every run together
+    from ``samples`` (per run: Δξ, transmitting subframes, no collision, γ, T); None for a
+    single run, or when the runs differ in discount, subframes per interval or horizon."""
+    if len(samples) < 2 or len({(g, t, d.shape[-1]) for d, _, _, g, t in samples}) != 1:
+        return None
+    *_, gamma, subframes = samples[0]
+    delta, transmitting, survived = (torch.cat([s[i] for s in samples]) for i in range(3))
+    return {
+        "runs": len(samples),
+        "cams": int(delta.shape[0]),
+        "credit": credit_summary(delta, transmitting, credits, gamma, subframes),
+        "cams_no_collision": int(survived.sum()),
+        "credit_no_collision": credit_summary(
+            delta[survived], transmitting[survived], credits, gamma, subframes
         ),
     }
 
@@ -267,6 +553,59 @@ def print_table(runs: list[dict], console: Console) -> None:
             f"{row['value_sd']:.3f}",
             "{in_time:.2f} ({after_in_time:.2f} / {after_miss:.2f})".format(**row["delivery"]),
         )
+    console.print(table)
+
+
+def _fmt_ratio(stat: dict) -> str:
+    return f"{stat['ratio']:+.2f} [{stat['low']:+.2f}, {stat['high']:+.2f}]"
+
+
+def print_credit_table(runs: list[dict], console: Console, pooled: dict | None = None) -> None:
+    """Per run and credit setting: what of a CAM's IVoI reaches the actions that carried it
+    (and over the CAMs of every run, ``pooled``)."""
+    table = Table(
+        title="Credit reaching the subframes that carried a dropped CAM (td Δξ over the horizon)"
+    )
+    columns = (
+        "run", "CAMs", "credit setting", "γ_s·λ_s", "w(0,0)", "w(0,1)",
+        "credit", "from j = 0", "share of full value",
+    )  # fmt: skip
+    for column in columns:
+        table.add_column(column, justify="left" if column in ("run", "credit setting") else "right")
+    blocks = [(f"{r['scenario']} seed {r['seed']} ({r['rra_reward']})", r["result"]) for r in runs]
+    if pooled is not None:
+        blocks.append((f"all {pooled['runs']} runs", pooled))
+    rows = []
+    for label, result in blocks:
+        rows.append((label, result["cams"], result["credit"]))
+        if "credit_no_collision" in result:
+            no_collision = (result["cams_no_collision"], result["credit_no_collision"])
+            rows.append((f"{label}, no collision", *no_collision))
+    for label, cams, credit in rows:
+        table.add_row(
+            label,
+            str(cams),
+            f"full value Σ_j {credit['gamma_interval']:g}^j Δξ",
+            "",
+            "",
+            "",
+            _fmt(credit["full_value"]),
+            "share " + _fmt_ratio(credit["full_value_share_j0"]),
+            "j ≥ 1: " + _fmt_ratio(credit["full_value_share_later"]),
+        )
+        for row in credit["settings"]:
+            table.add_row(
+                "",
+                "",
+                f"{row['name']} (γ {row['gamma']:g}/{row['gamma_scale']}, "
+                f"λ {row['lmbda']:g}/{row['lmbda_scale']})",
+                f"{row['gamma_per_subframe'] * row['lmbda_per_subframe']:.5f}",
+                f"{row['weight_t0_j0']:.4f}",
+                f"{row['weight_t0_j1']:.4f}",
+                _fmt(row["credit"]),
+                _fmt(row["credit_from_j0"]),
+                _fmt_ratio(row["share_of_full_value"]),
+            )
     console.print(table)
 
 
@@ -332,8 +671,21 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--horizon", type=int, default=40, help="intervals over which the value is summed"
     )
+    parser.add_argument(
+        "--credit",
+        default=DEFAULT_CREDITS,
+        help=f"RRA credit settings, comma-separated: {', '.join(CREDIT_PRESETS)} or "
+        "GAMMA:SCALE:LAMBDA:SCALE (SCALE subframe: per 1 ms subframe; interval: per control "
+        "interval, applied as x^(1/T) per subframe)",
+    )
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads (0: default)")
     parser.add_argument("--progress", action=argparse.BooleanOptionalAction, default=True)
+    parser.add_argument(
+        "--plot",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="write the PNG next to the JSON",
+    )
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
     if args.rra not in (LEARNED, *RRA_BASELINES):
@@ -342,11 +694,12 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--episodes {args.episodes} must be >= 2")
     if args.horizon < 1:
         raise SystemExit(f"--horizon {args.horizon} must be >= 1")
+    credits = parse_credits(args.credit)
     if args.threads:
         torch.set_num_threads(args.threads)
     console = table_console(file_width=200)
     began = time.perf_counter()
-    runs = []
+    runs, samples = [], []
     for path, loop in loaded_checkpoints(args.checkpoints, "cam_value_", console):
         if args.rra == LEARNED and not loop.cfg.rra.learned:
             raise SystemExit(f"--rra {LEARNED}: {path} learned no RRA policy")
@@ -355,17 +708,27 @@ def main(argv: list[str] | None = None) -> int:
             {
                 **checkpoint_run(path, loop.cfg),
                 "result": measure(
-                    loop, args.rra, args.episodes, starts, args.horizon, args.progress
+                    loop,
+                    args.rra,
+                    args.episodes,
+                    starts,
+                    args.horizon,
+                    args.progress,
+                    credits,
+                    samples,
                 ),
             }
         )
+    pooled = pooled_credit(samples, credits)
     print_table(runs, console)
-    note = (
-        f"benchmarks/cam_value.py --rra {args.rra} --episodes {args.episodes} "
-        f"--starts {args.starts} --horizon {args.horizon}; 95% CIs over CAMs"
-    )
-    plot = plot_runs(runs, args.output.with_suffix(".png"), note)
-    console.print(f"wrote {plot}")
+    print_credit_table(runs, console, pooled)
+    if args.plot:
+        note = (
+            f"benchmarks/cam_value.py --rra {args.rra} --episodes {args.episodes} "
+            f"--starts {args.starts} --horizon {args.horizon}; 95% CIs over CAMs"
+        )
+        plot = plot_runs(runs, args.output.with_suffix(".png"), note)
+        console.print(f"wrote {plot}")
     atomic_write_json(
         args.output,
         {
@@ -373,8 +736,11 @@ def main(argv: list[str] | None = None) -> int:
             "episodes": args.episodes,
             "starts": args.starts,
             "horizon": args.horizon,
+            "credit": args.credit,
+            "bootstrap_resamples": BOOTSTRAP_RESAMPLES,
             "seconds": time.perf_counter() - began,
             "runs": runs,
+            **({"pooled": pooled} if pooled is not None else {}),
         },
     )
     console.print(f"wrote {args.output}")

@@ -239,12 +239,13 @@ def test_cam_value_pairs_twins_that_differ_only_by_the_dropped_cam(checkpoint, t
     assert len(credit["delta_xi_mean_by_j"]) == 1
     assert 1 <= credit["transmitting_subframes"]["mean"] <= 49  # delivered by subframe T−2
     assert [row["name"] for row in credit["settings"]] == [
-        "subframe γ=0.99 λ=0.95", "subframe γ=0.99 λ=1", "interval γ=0.99 λ=0.95",
-        "interval γ=0.99 λ=1",
+        "legacy", "paper", "paper_long_gae", "legacy_lambda1", "paper_lambda1",
     ]  # fmt: skip
     for row in credit["settings"]:
         assert row["credit"]["mean"] == pytest.approx(row["credit_from_j0"]["mean"])
         assert row["credit"]["n"] == result["cams"]
+    assert 0 <= result["cams_no_collision"] <= result["cams"]
+    assert result["credit_no_collision"]["full_value"]["n"] == result["cams_no_collision"]
     for bad, message in (
         (["--starts", "19", "--horizon", "5"], "must lie in"),
         (["--rra", "best"], "is not one of"),
@@ -268,7 +269,13 @@ def test_delivery_persistence_counts_consecutive_pairs_of_running_scenarios():
 
 def test_cam_credit_gae_weights_per_subframe_and_per_interval():
     script = _load("cam_value")
-    subframe, interval = script.parse_credits("subframe:0.99:0.95,interval:0.99:0.95")
+    subframe, interval, paper = script.parse_credits("legacy, paper_long_gae,paper")
+    assert (subframe.gamma_scale, subframe.lmbda_scale) == ("subframe", "subframe")
+    assert (interval.gamma_scale, interval.lmbda_scale) == ("interval", "interval")
+    assert (paper.gamma_scale, paper.lmbda_scale) == ("interval", "subframe")
+    assert script.parse_credits("0.99:interval:0.95:interval")[0].per_subframe(50) == (
+        interval.per_subframe(50)
+    )
     per_subframe = script.gae_weights(subframe, 50, 3)  # [T, H]
     per_interval = script.gae_weights(interval, 50, 3)
     assert per_subframe.shape == per_interval.shape == (50, 3)
@@ -281,6 +288,8 @@ def test_cam_credit_gae_weights_per_subframe_and_per_interval():
     assert float(per_interval[49, 1]) == pytest.approx(0.99 * 0.95)  # γλ per interval
     assert float(per_interval[0, 2]) == pytest.approx((0.99 * 0.95) ** (2 + 49 / 50))
     assert interval.per_subframe(50) == pytest.approx((0.99**0.02, 0.95**0.02))
+    assert paper.per_subframe(50) == pytest.approx((0.99**0.02, 0.95))
+    assert float(script.gae_weights(paper, 50, 1)[0, 0]) == pytest.approx((0.99**0.02 * 0.95) ** 49)
     # a Δξ only at j = 0: the credit is the mean over the transmitting subframes of w(t, 0)·Δξ
     transmitting = torch.zeros(2, 50, dtype=torch.bool)
     transmitting[0, :5] = True
@@ -306,6 +315,76 @@ def test_cam_credit_gae_weights_per_subframe_and_per_interval():
     assert summary["full_value_share_later"]["ratio"] == pytest.approx(0.0, abs=1e-12)
     for row in summary["settings"]:
         assert row["credit"]["mean"] == pytest.approx(row["credit_from_j0"]["mean"])
-    for bad in ("minute:0.99:0.95", "subframe:0.99", "interval:1.5:0.95", "subframe:x:1"):
-        with pytest.raises(SystemExit, match="SCALE:GAMMA:LAMBDA"):
+    survived = torch.tensor([True, False])
+    runs = [(delta_xi, transmitting, survived, 0.99, 50)] * 2
+    pooled = script.pooled_credit(
+        [*runs[:1], (delta_xi[:1], transmitting[:1], survived[:1], 0.99, 50)], [subframe]
+    )
+    assert pooled["runs"] == 2 and pooled["cams"] == 3 and pooled["cams_no_collision"] == 2
+    assert pooled["credit"]["full_value"]["mean"] == pytest.approx((0.2 - 0.1 + 0.2) / 3)
+    assert pooled["credit_no_collision"]["full_value"]["mean"] == pytest.approx(0.2)
+    assert script.pooled_credit(runs[:1], [subframe]) is None
+    assert script.pooled_credit([runs[0], (*runs[0][:4], 10)], [subframe]) is None
+    bad_specs = ("bogus", "0.99:minute:0.95:subframe", "0.99:subframe", "1.5:interval:1:interval")
+    for bad in (*bad_specs, "x:subframe:1:subframe"):
+        with pytest.raises(SystemExit, match="GAMMA:SCALE:LAMBDA:SCALE"):
             script.parse_credits(bad)
+
+
+def test_rra_learning_curve_plateau_rule_on_hand_made_curves():
+    curves = _load("rra_learning_curves")
+    iterations = [0, 10, 20, 30, 40, 50, 60]
+    # delivery rises, then stays within 2 pp of the mean of its last 3 points from it 30 on;
+    # V2I is flat from the start: the budget is the later of the two, 30
+    rising = {
+        "cam_delivery_rate": [0.05, 0.30, 0.60, 0.79, 0.80, 0.81, 0.80],
+        "v2i_throughput_mbps_per_link": [1.60] * 7,
+    }
+    found = curves.plateau(iterations, rising)
+    assert found["plateaued"] and found["budget_iterations"] == 30
+    assert found["stable_points"] == 4
+    assert found["metrics"]["v2i_throughput_mbps_per_link"]["stable_from_iteration"] == 0
+    assert found["metrics"]["cam_delivery_rate"]["tolerance"] == pytest.approx(0.02)
+    assert found["metrics"]["cam_delivery_rate"]["reference"] == pytest.approx(2.41 / 3)
+    # still climbing at the end: only the reference window is near its own mean
+    climbing = {**rising, "cam_delivery_rate": [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7]}
+    assert not curves.plateau(iterations, climbing)["plateaued"]
+    assert curves.plateau(iterations, climbing)["budget_iterations"] is None
+    # a wider tolerance: 0.4 is within 0.25 of the last points' 0.6, 0.3 is not
+    tolerances = {"cam_delivery_rate": 0.25, "v2i_throughput_mbps_per_link": 0.02}
+    wide = curves.plateau(iterations, climbing, tolerances)
+    assert wide["metrics"]["cam_delivery_rate"]["tolerance"] == pytest.approx(0.25)
+    assert wide["plateaued"] and wide["budget_iterations"] == 30
+    # V2I stepping up 3 points before the end: a stretch of the window alone is no plateau
+    late = {**rising, "v2i_throughput_mbps_per_link": [1.5] * 4 + [1.6] * 3}
+    assert (
+        curves.plateau(iterations, late)["metrics"]["v2i_throughput_mbps_per_link"]["stable_points"]
+        == 3
+    )
+    assert not curves.plateau(iterations, late)["plateaued"]
+    # a late excursion restarts the stable stretch
+    assert curves.stable_from([1.0, 1.0, 1.0, 2.0, 1.0, 1.0, 1.0], 0.05) == 4
+    with pytest.raises(ValueError, match="at least window=3 points"):
+        curves.stable_from([1.0, 1.0], 0.1)
+    ci = curves.interval([1.0, 2.0, 3.0])
+    assert ci["mean"] == 2.0 and ci["n"] == 3
+    assert ci["high"] - 2.0 == pytest.approx(4.302653 / 3**0.5, rel=1e-6)  # t(0.975, 2)·s/√n
+
+
+def test_rra_learning_curve_arguments_fail_in_one_line():
+    curves = _load("rra_learning_curves")
+    for argv, message in (
+        (["--methods", "jocc_k050,bogus"], "--methods 'jocc_k050,bogus' must list some of"),
+        (["--credits", "paper,nope"], "--credits 'paper,nope' must list some of paper, legacy"),
+        (["--seeds", "0,0"], "--seeds '0,0' must name at least one seed, each once"),
+        (["--eval-every", "0"], "--eval-every 0 must be >= 1"),
+        (["--eval-intervals", "201"], "--eval-intervals 201 exceeds the episode"),
+        (["--report-only"], "--report-only needs at least one --merge file"),
+    ):
+        with pytest.raises(SystemExit, match=message) as err:
+            curves.main(argv)
+        assert "\n" not in str(err.value.code)
+    cfg = curves.run_config("drra", "legacy", seed=4, warm_start=False)
+    assert cfg.rra.name == "drra" and cfg.seed == 4 and cfg.control.warm_start == "none"
+    assert cfg.algo.rra_credit == "subframe" and cfg.algo.rra_num_envs == 64
+    assert curves.run_config("jocc_k050", "paper", seed=0).algo == AlgoConfig()
