@@ -25,6 +25,9 @@ def _write_trace(path, duration_s=120.0, vehicles=("",)):
     return path
 
 
+DEFAULT_TRACES = RunConfig().scenario.traces
+
+
 def _cfg(**scenario):
     cfg = RunConfig()
     return replace(cfg, scenario=replace(cfg.scenario, **scenario))
@@ -41,8 +44,9 @@ def test_a_single_vehicle_csv_is_split_in_time(tmp_path):
     assert p_train.duration_s == pytest.approx(0.8 * 120.0, abs=0.1)
     assert p_eval.duration_s == pytest.approx(0.2 * 120.0, abs=0.1)
     assert "first 80% / last 20%" in evaluation.info.description
-    # and a run config that names the file uses the same two parts
-    cfg = validate(_cfg(traces="csv", trace_path=str(path)))
+    # and a run config that names the file uses the same two parts (24 s of eval part hold one
+    # disjoint window of episode + look-ahead: random windows)
+    cfg = validate(_cfg(traces="csv", trace_path=str(path), eval_windows="random"))
     run_train, run_eval = trace_sources(cfg)
     assert run_train.profiles[0].duration_s == p_train.duration_s
     assert run_eval.profiles[0].duration_s == p_eval.duration_s
@@ -66,7 +70,10 @@ def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch
     [
         (dict(traces="foo"), "scenario.traces='foo' is not a known trace set"),
         (dict(traces="csv"), "scenario.traces='csv' reads a file"),
-        (dict(trace_path="drive.csv"), "scenario.traces='udds' cannot read"),
+        (
+            dict(trace_path="drive.csv"),
+            f"scenario.traces={RunConfig().scenario.traces!r} cannot read",
+        ),
         (dict(traces="csv", trace_path="no/such.csv"), "scenario.trace_path='no/such.csv'"),
         (dict(traces="csv", trace_path="bad.csv"), "bad.csv row 3: time 1 s is earlier"),
         (dict(traces="ngsim", trace_path="drive.csv"), "(ngsim)"),
@@ -226,7 +233,7 @@ def test_a_recorded_trace_set_trains_and_evaluates_on_different_stretches(monkey
     t = np.arange(0.0, 300.0, 0.1)
     drive = SpeedProfile(t, 20.0 + np.sin(t / 10.0), "drive", "recorded")
     monkeypatch.setitem(traces_module._TRACE_SOURCES, "drive", lambda: ProfileTraceSource([drive]))
-    cfg = validate(_cfg(traces="drive"))
+    cfg = validate(_cfg(traces="drive", eval_windows="random"))  # 60 s held out: 2 windows
     train, evaluation = trace_sources(cfg)
     (p_train,), (p_eval,) = train.profiles, evaluation.profiles
     assert p_train.time_s[-1] <= p_eval.time_s[0] + 1e-9

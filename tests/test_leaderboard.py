@@ -616,8 +616,8 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert text.count("IQM not reported: 2 run(s) per method, fewer than the 10") == len(
         b.scenarios
     )
-    assert "- **leader traces**: platoon4: `udds` (EPA Urban" in text  # the scenario's default
-    assert "training draws from the first 80% of each drive" in text
+    assert "- **leader traces**: platoon4: `cmap` (recorded drives" in text  # the default
+    assert "training and evaluation drives come from different vehicles" in text
     for method in b.methods:
         assert f"| {method} |" in text
     for kind in PLOT_KINDS:

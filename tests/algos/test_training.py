@@ -225,7 +225,7 @@ def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):
     assert summary["evoi_ci_low"] <= summary["evoi"] <= summary["evoi_ci_high"]
     assert summary["trainer_iterations"] == {"pi_star": 1, "pi_tilde": 1, "rra": 2}
     assert (summary["kappa1"], summary["kappa2"]) == (cfg.rra.kappa1, cfg.rra.kappa2_value)
-    assert summary["traces"] == cfg.scenario.traces == "udds"
+    assert summary["traces"] == cfg.scenario.traces == "cmap"
     payload = load_checkpoint(tmp_path / "checkpoints" / "last.pt", to_dict(cfg))
     assert payload["position"]["iteration"] == 1
 
@@ -447,3 +447,16 @@ def test_burned_in_is_refused_outside_rra_mode_and_range(tmp_path):
     with pytest.raises(ConfigError, match="only used with mode='rra'"):
         with loop.pi_star.env.burned_in(3):
             pass
+
+
+def test_a_saved_config_without_newer_keys_keeps_the_behaviour_it_was_run_with():
+    from vdtn_marl.config import ABSENT_KEY_BEHAVIOUR, from_saved_dict
+
+    saved = to_dict(RunConfig())
+    for group, key in ABSENT_KEY_BEHAVIOUR:
+        del saved[group][key]
+    old = from_saved_dict(saved)
+    for (group, key), value in ABSENT_KEY_BEHAVIOUR.items():
+        assert getattr(getattr(old, group), key) == value, key
+    assert old.algo.rra_credit != RunConfig().algo.rra_credit  # not today's default
+    assert from_saved_dict(to_dict(RunConfig())) == RunConfig()  # present keys are kept

@@ -147,8 +147,8 @@ def test_eval_lookahead_is_the_twins_default():
     assert EVAL_LOOKAHEAD_INTERVALS == default
 
 
-def test_config_switch_defaults_to_random_and_is_validated():
-    assert ScenarioConfig().eval_windows == "random" and EVAL_WINDOWS == ("random", "disjoint")
+def test_config_switch_defaults_to_disjoint_and_is_validated():
+    assert ScenarioConfig().eval_windows == "disjoint" and EVAL_WINDOWS == ("random", "disjoint")
     cfg = RunConfig()
     validate(replace(cfg, scenario=replace(cfg.scenario, traces="cmap", eval_windows="disjoint")))
     with pytest.raises(ConfigError, match="scenario.eval_windows='all' is not allowed"):

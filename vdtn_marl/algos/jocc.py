@@ -53,7 +53,7 @@ from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
 from vdtn_marl.config import (
     IVOI_ESTIMATORS,
     RunConfig,
-    from_dict,
+    from_saved_dict,
     to_dict,
     validate,
     validate_device,
@@ -253,7 +253,7 @@ class JointOptimisation:
         refuses a checkpoint of a run with learned control that trained no π̃."""
         payload = load_checkpoint(path)
         try:
-            cfg = from_dict(payload["config"])
+            cfg = from_saved_dict(payload["config"])
         except (KeyError, TypeError) as err:
             raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
         task = payload.get("task")

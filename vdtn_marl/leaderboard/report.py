@@ -149,6 +149,11 @@ def _traces_line(composed: Mapping) -> str:
                 f"from the first {train:.0%} of each drive, evaluation from the last "
                 f"{1 - train:.0%})"
             )
+        elif traces in provenance and not provenance[traces].get("synthetic", True):
+            what = (
+                f"`{traces}` ({provenance[traces]['description']}; recorded: training and "
+                "evaluation drives come from different vehicles)"
+            )
         else:
             info = provenance.get(traces, {}).get("description", "generated")
             what = f"`{traces}` ({info}; generated: evaluation draws traces training never saw)"
