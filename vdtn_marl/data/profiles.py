@@ -72,6 +72,15 @@ def split(profiles: Sequence[SpeedProfile], part: Part = "train") -> list[SpeedP
     return [p for p in profiles if is_eval(p.vehicle_id) == want_eval]
 
 
+def check_sample_request(num_traces: int, num_points: int, dt_s: float) -> None:
+    """A trace source's ``sample`` arguments: ≥ 1 trace of ≥ 2 points at a step > 0 s."""
+    if num_traces < 1 or num_points < 2 or not dt_s > 0:
+        raise ValueError(
+            f"num_traces={num_traces}, num_points={num_points}, dt_s={dt_s} must be "
+            ">= 1, >= 2 and > 0"
+        )
+
+
 class ProfileTraceSource:
     """Hands out random windows of recorded speed profiles, resampled to the caller's grid.
 
@@ -130,11 +139,7 @@ class ProfileTraceSource:
     def sample(
         self, num_traces: int, num_points: int, dt_s: float, generator: torch.Generator
     ) -> torch.Tensor:
-        if num_traces < 1 or num_points < 2 or not dt_s > 0:
-            raise ValueError(
-                f"num_traces={num_traces}, num_points={num_points}, dt_s={dt_s} must be "
-                ">= 1, >= 2 and > 0"
-            )
+        check_sample_request(num_traces, num_points, dt_s)
         span = (num_points - 1) * dt_s
         if self.too_short == "reflect":
             eligible = np.arange(len(self.profiles))
@@ -382,11 +387,7 @@ class DisjointWindowSource:
     def sample(
         self, num_traces: int, num_points: int, dt_s: float, generator: torch.Generator
     ) -> torch.Tensor:
-        if num_traces < 1 or num_points < 2 or not dt_s > 0:
-            raise ValueError(
-                f"num_traces={num_traces}, num_points={num_points}, dt_s={dt_s} must be "
-                ">= 1, >= 2 and > 0"
-            )
+        check_sample_request(num_traces, num_points, dt_s)
         counts = self.windows_per_profile(num_points, dt_s)
         total = int(counts.sum())
         span, stride = (num_points - 1) * dt_s, num_points * dt_s
