@@ -48,6 +48,13 @@ measurement ran as two invocations side by side (about 55 minutes of wall time o
         --eval-episodes 8 --report-only --merge benchmarks/results/rra_learning_curves_paper.json \\
         --merge benchmarks/results/rra_learning_curves_legacy.json
 
+On the recorded drives (``cmap``, the default traces of runs; random windows of the held-out
+vehicles), 15 minutes on a quiet machine:
+
+    OMP_NUM_THREADS=1 python benchmarks/rra_learning_curves.py --methods jocc_k050,drra \\
+        --credits paper --seeds 0,1,2 --rra-iterations 40 --eval-every 10 --eval-episodes 8 \\
+        --traces cmap --output benchmarks/results/rra_learning_curves_cmap.json
+
 The merged ``rra_learning_curves.json`` keeps every run and every invocation (command, date,
 load averages, seconds); the two partial files are not kept. Most of the time goes to the
 control stages (π*'s causal-MPC warm start: 7-12 minutes per seed at a quarter of a core);
