@@ -68,8 +68,6 @@ from vdtn_marl.sim.platoon import (
     vehicle_observation,
 )
 
-__all__ = ["RRA_CONTROL_CLIP", "DigitalTwin", "IntervalRecord", "resolve_device"]
-
 
 @dataclass
 class IntervalRecord:
