@@ -14,7 +14,7 @@ without shards to write the report from all of them:
         shard=0,1 num_shards=2 hydra/launcher=joblib
     python benchmarks/leaderboard.py benchmark=leaderboard
 
-See the README, section Leaderboard, and the package vdtn_marl/leaderboard/.
+See docs/leaderboard.md and the package vdtn_marl/leaderboard/.
 """
 
 from __future__ import annotations

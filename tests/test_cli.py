@@ -451,7 +451,7 @@ def test_submitit_local_sweep_fake_entry_points(tmp_path, fake_env):
 
 @pytest.mark.skipif(
     importlib.util.find_spec("hydra_plugins.hydra_ray_launcher") is None,
-    reason="hydra-ray-launcher is not installed (see README, Command line > Ray)",
+    reason="hydra-ray-launcher is not installed (see docs/cli.md, Ray)",
 )
 def test_ray_sweep_on_local_instance_fake_entry_points(tmp_path, fake_env):
     """The Ray launcher starts a local Ray instance on loopback and runs the jobs there."""

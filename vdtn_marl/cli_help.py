@@ -219,7 +219,7 @@ def command_help(command: str) -> str:
         f"  {'-m ' + command + ' KEY=A,B,C ...':<33} one job per combination (basic: in turn)",
         "  hydra/launcher=joblib             jobs in parallel processes on this machine",
         "  hydra/launcher=submitit_slurm     jobs on SLURM (pip install 'vdtn-marl[slurm]')",
-        "  hydra/launcher=ray                jobs on a Ray cluster (see the README)",
+        "  hydra/launcher=ray                jobs on a Ray cluster (see docs/cli.md)",
         "",
         "outputs: outputs/<command>/<date_time>/ (one run) or multirun/<command>/<date_time>/<n>/",
         *_OUTPUTS[command],

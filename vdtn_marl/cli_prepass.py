@@ -65,7 +65,7 @@ _LAUNCHERS = {
 _LAUNCHER_PLUGINS = {
     "hydra_plugins.hydra_joblib_launcher": "hydra-joblib-launcher (pip install vdtn-marl)",
     "hydra_plugins.hydra_submitit_launcher": "pip install 'vdtn-marl[slurm]'",
-    "hydra_plugins.hydra_ray_launcher": "see the README, section Command line > Ray",
+    "hydra_plugins.hydra_ray_launcher": "see docs/cli.md, section Ray",
 }
 
 

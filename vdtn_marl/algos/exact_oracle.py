@@ -41,7 +41,7 @@ synthetic scenarios of ``benchmarks/training.py`` (where
 :class:`~vdtn_marl.algos.mpc_oracle.OracleController`, the receding-horizon MPC with a
 subgradient solver, cost 0.0453: 19 % more), and 0.046 on 8 UDDS scenarios (the MPC: 0.065,
 42 % more, and more than CACC's 0.055). That MPC is therefore not the lower bound its name
-suggests; see the README (Training, VoI and baselines).
+suggests; see docs/training.md.
 """
 
 from __future__ import annotations

@@ -24,7 +24,7 @@ seed, so a warm start is repeatable and leaves the global torch RNG alone (excep
 trainer's observation-scaling rollout, when it has not run yet).
 
 Measured (``benchmarks/training.py``, 3 rounds × 32 scenarios × 10 s, ≈ 100 s on one CPU
-thread): see the README's training figures.
+thread): see docs/training.md.
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Figures of the recorded trace sets' train and eval parts, as runs split them.
 
-``python -m vdtn_marl.data.summary`` prints the table of README's *Leader traces* section:
+``python -m vdtn_marl.data.summary`` prints the table of docs/leader_traces.md:
 for each part (:func:`~vdtn_marl.data.selection.named_sources`), its total duration, number
 of segments, how many disjoint windows of an episode and the twin's look-ahead it holds
 (:class:`~vdtn_marl.data.profiles.DisjointWindowSource`: 20 s for the scenarios' 10 s episodes
