@@ -88,6 +88,48 @@ def test_bad_trace_settings_are_config_errors(scenario, fragment, tmp_path, monk
     assert fragment in str(info.value)
 
 
+def test_a_trace_file_too_short_for_a_scenario_is_refused_before_anything_runs(
+    tmp_path, monkeypatch, capsys
+):
+    """32 s of one drive: its eval part (the last 20 %, 6.4 s) cannot hold the 20 s of an
+    episode and the look-ahead; the message says how long the file must be and why."""
+    path = _write_trace(tmp_path / "short.csv", duration_s=32.0)
+    with pytest.raises(ConfigError) as info:
+        validate(_cfg(traces="csv", trace_path=str(path), eval_windows="random"))
+    message = str(info.value)
+    assert message.startswith(f"scenario.trace_path={str(path)!r}") and "\n" not in message
+    for part in ("eval part", "6.4 s", "20 s", "look-ahead", "at least 100 s"):
+        assert part in message, message
+    # a shorter episode does not rescue it: the 10 s look-ahead alone needs a 50 s file
+    with pytest.raises(ConfigError, match="scenario.trace_path"):
+        validate(_cfg(traces="csv", trace_path=str(path), episode_intervals=20))
+    validate(_cfg(traces="csv", trace_path=str(_write_trace(tmp_path / "ok.csv", 100.0)),
+                  eval_windows="random"))  # fmt: skip
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "out").mkdir()
+    monkeypatch.chdir(tmp_path / "out")
+    assert cli.main(["jocc", "scenario.traces=csv", f"scenario.trace_path={path}"]) == 2
+    lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
+    assert len(lines) == 1 and "at least 100 s" in lines[0], lines
+    assert list((tmp_path / "out").iterdir()) == []
+
+
+def test_a_recorded_part_without_a_long_enough_profile_is_refused(monkeypatch):
+    from vdtn_marl.data import profiles as profiles_module
+    from vdtn_marl.data.loaders import SpeedProfile
+
+    long_t, short_t = np.arange(0.0, 60.0, 0.1), np.arange(0.0, 12.0, 0.1)
+    fake = [  # us101/2 evaluates, us101/7 trains (split by vehicle)
+        SpeedProfile(short_t, 20.0 + 0 * short_t, "us101/2", "fake"),
+        SpeedProfile(long_t, 20.0 + 0 * long_t, "us101/7", "fake"),
+    ]
+    monkeypatch.setattr(profiles_module, "load_profiles", lambda *a, **k: list(fake))
+    with pytest.raises(ConfigError) as info:
+        validate(_cfg(traces="csv", trace_path=__file__, eval_windows="random"))
+    assert "no profile of its eval part" in str(info.value), info.value
+    assert "the longest 11.9 s" in str(info.value), info.value
+
+
 @pytest.mark.parametrize(
     "overrides, key",
     [

@@ -257,18 +257,26 @@ def run_job(command: str, cfg: Any) -> dict:
 
     from vdtn_marl import results
     from vdtn_marl.algos import api
-    from vdtn_marl.runs import CONFIG_FILE, atomic_write_text, keep_log_off_console
+    from vdtn_marl.runs import (
+        CONFIG_FILE,
+        atomic_write_text,
+        check_interrupt,
+        graceful_interrupts,
+        keep_log_off_console,
+    )
 
-    data = job_config(cfg)
-    run_cfg = to_run_config(data, command)
-    keep_log_off_console(run_cfg.progress)
     run_dir = Path(HydraConfig.get().runtime.output_dir)
-    atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
-    entry: Callable[..., dict] = {"train": api.train, "jocc": api.jocc, "eval": api.evaluate}[
-        command
-    ]
-    try:
-        summary = entry(run_cfg, run_dir)
+    try:  # Ctrl-C from here on stops at a safe point of the run (vdtn_marl.runs)
+        with graceful_interrupts(lambda: interrupted_message(command, run_dir)):
+            data = job_config(cfg)
+            run_cfg = to_run_config(data, command)
+            keep_log_off_console(run_cfg.progress)
+            atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
+            entry: Callable[..., dict] = {
+                "train": api.train, "jocc": api.jocc, "eval": api.evaluate,
+            }[command]  # fmt: skip
+            check_interrupt()
+            summary = entry(run_cfg, run_dir)
     except KeyboardInterrupt:
         print(interrupted_message(command, run_dir), file=sys.stderr)
         raise SystemExit(EXIT_INTERRUPTED) from None
@@ -344,7 +352,7 @@ def _bench_job(cfg: Any) -> None:
     from hydra.types import RunMode
 
     from vdtn_marl import config, leaderboard
-    from vdtn_marl.runs import keep_log_off_console
+    from vdtn_marl.runs import graceful_interrupts, keep_log_off_console
 
     hydra_cfg = HydraConfig.get()
     bench_cfg = config.validate_benchmark(leaderboard.bench_config(job_config(cfg)))
@@ -352,11 +360,16 @@ def _bench_job(cfg: Any) -> None:
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     # a sweep's job: its own overrides, as one command would set them
     command = shlex.join([PROG, "bench", *hydra_cfg.overrides.task])
+    again = f"complete cells are kept; run {command} again to continue"
     try:
-        result = leaderboard.run_benchmark(bench_cfg, command=command)
+        with graceful_interrupts(lambda: again):
+            result = leaderboard.run_benchmark(bench_cfg, command=command)
     except leaderboard.LeaderboardError as exc:
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_CONFIG_ERROR) from None
+    except KeyboardInterrupt:
+        print(f"interrupted; {again}", file=sys.stderr)
+        raise SystemExit(EXIT_INTERRUPTED) from None
     total = len(leaderboard.plan(bench_cfg))
     print(
         f"{bench_cfg.benchmark.name} v{bench_cfg.benchmark.version}: {len(result.ran)} cell(s) "
@@ -457,7 +470,11 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
         # Flags first, then the overrides: the order Hydra's own parser accepts.
         return _launch(command, [*_flag_args(argv, list(hargs.overrides)), *overrides])
     except KeyboardInterrupt:  # outside a job's entry point (which says more; see run_job)
-        print("interrupted", file=sys.stderr)
+        print(
+            "interrupted while Hydra started or ended the job, outside the run: run the command "
+            "again (add resume=true if the run directory holds a checkpoint)",
+            file=sys.stderr,
+        )
         return EXIT_INTERRUPTED
 
 

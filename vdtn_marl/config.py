@@ -312,11 +312,20 @@ def validate(cfg: RunConfig) -> RunConfig:
     _positive_int("threads", cfg.threads, low=0, high=1024)
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)
-    from vdtn_marl.data.selection import EVAL_WINDOWS, check_eval_windows, check_trace_settings
+    from vdtn_marl.data.selection import (
+        EVAL_WINDOWS,
+        check_eval_windows,
+        check_trace_lengths,
+        check_trace_settings,
+    )
 
     check_trace_settings(s.traces, s.trace_path)
     _choice("scenario.eval_windows", s.eval_windows, EVAL_WINDOWS)
     p = cfg.twin_params()
+    check_trace_lengths(
+        s.traces, s.trace_path,
+        episode_intervals=p.episode_intervals, control_interval_s=p.platoon.control_interval_s,
+    )  # fmt: skip
     check_eval_windows(
         s.traces, s.trace_path, s.eval_windows, episodes=e.eval_episodes,
         episode_intervals=p.episode_intervals, control_interval_s=p.platoon.control_interval_s,

@@ -1,6 +1,11 @@
 """Run outputs: atomic files, the metrics CSV (and TensorBoard when installed), progress bars,
 and the run log.
 
+Ctrl-C (:func:`graceful_interrupts`): the first SIGINT only sets a flag, which the training
+loop reads at safe points (:func:`check_interrupt`, between PPO iterations and evaluation
+intervals), so that it stops after saving a checkpoint and never inside a library call (where a
+``KeyboardInterrupt`` can come out as another error); a second Ctrl-C stops at once.
+
 Every file a run writes goes through :func:`atomic_write_bytes` (a temporary file in the same
 directory, then ``os.replace``), so an interrupted run never leaves a half-written summary,
 checkpoint or table.
@@ -21,8 +26,10 @@ import logging
 import math
 import os
 import shlex
+import signal
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
@@ -183,6 +190,67 @@ def progress(total: int, description: str, enabled: bool = True):
     from tqdm.auto import tqdm
 
     return tqdm(total=total, desc=description, disable=not enabled, dynamic_ncols=True, leave=True)
+
+
+# --- Ctrl-C ----------------------------------------------------------------------------------
+
+
+class _Interrupt:
+    """The process's Ctrl-C state: whether a stop was asked for (:func:`graceful_interrupts`)."""
+
+    requested = False
+
+
+def interrupt_requested() -> bool:
+    """Whether Ctrl-C was pressed inside :func:`graceful_interrupts` (and not yet acted on)."""
+    return _Interrupt.requested
+
+
+def check_interrupt() -> None:
+    """Raise ``KeyboardInterrupt`` here, at a safe point, if Ctrl-C was pressed."""
+    if _Interrupt.requested:
+        _Interrupt.requested = False
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def graceful_interrupts(on_force: Any = None) -> Iterator[None]:
+    """Inside, the first SIGINT sets the flag :func:`check_interrupt` reads (and says so on
+    stderr); a second one prints ``on_force()`` (a line: where the run can continue from) and
+    ends the process at once with exit code 130. Outside the main thread, or where SIGINT is
+    ignored, it changes nothing. The previous handler comes back on exit."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if previous is signal.SIG_IGN:
+        yield
+        return
+
+    def handler(signum: int, frame: Any) -> None:
+        if not _Interrupt.requested:
+            _Interrupt.requested = True
+            print(
+                "\nstopping at the next safe point (after saving a checkpoint); "
+                "press Ctrl-C again to stop now",
+                file=sys.stderr,
+                flush=True,
+            )
+            return
+        line = "interrupted again: stopped now"
+        if on_force is not None:
+            with contextlib.suppress(Exception):
+                line = f"{line}; {on_force()}"
+        print(line, file=sys.stderr, flush=True)
+        os._exit(130)
+
+    _Interrupt.requested = False
+    signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        _Interrupt.requested = False
 
 
 # --- the run log ---------------------------------------------------------------------------

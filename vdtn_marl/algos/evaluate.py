@@ -19,6 +19,7 @@ import torch
 
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.runs import check_interrupt
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import IVoIEstimator, close_interval
@@ -183,6 +184,7 @@ def evaluate_system(
         return control(observation)
 
     for k in range(intervals):
+        check_interrupt()  # Ctrl-C stops here, between intervals (vdtn_marl.runs)
         if k > 0:
             twin.begin_interval()
         if radio:

@@ -68,6 +68,8 @@ from vdtn_marl.runs import (
     MetricsLog,
     atomic_write_bytes,
     atomic_write_json,
+    check_interrupt,
+    interrupt_requested,
     logged_stage,
     progress,
     run_outputs,
@@ -390,6 +392,9 @@ class JointOptimisation:
                 self.train_log.log(row, step=None)
                 bar.update(1)
                 bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
+                if interrupt_requested() and trainer.iteration < end:
+                    self.save()  # Ctrl-C: keep this iteration, then stop (runs.py)
+                    check_interrupt()
                 if every and trainer.iteration < end and trainer.iteration % every == 0:
                     self.save()
         selected = trainer.finish_stage()["best_iteration"]
@@ -411,7 +416,7 @@ class JointOptimisation:
                 self.params,
                 intervals=intervals,
                 trace_source=self.train_traces,
-                progress=bar.update,
+                progress=lambda n: (check_interrupt(), bar.update(n)),
             )
         self.position["warm_start"] = {"teacher": self.cfg.control.warm_start, **asdict(stats)}
 
@@ -483,6 +488,7 @@ class JointOptimisation:
                     self._train_stage(stage, bar)
                 self._advance()
                 self.save()
+                check_interrupt()
         summary = self.summary(time.perf_counter() - began, resumed)
         self.write_raw_evaluation()
         summary["plots"] = self.write_plots()

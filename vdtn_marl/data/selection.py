@@ -24,6 +24,8 @@ from pathlib import Path
 
 from vdtn_marl.data.loaders import LOADERS
 from vdtn_marl.data.profiles import (
+    TIME_SPLIT_HOW,
+    TIME_SPLIT_TRAIN_FRACTION,
     DisjointWindowSource,
     ProfileTraceSource,
     load_train_eval_sources,
@@ -146,6 +148,56 @@ def check_eval_windows(
             f"{available} disjoint windows of {span:g} s (episode and look-ahead), "
             f"experiment.eval_episodes={episodes} needed; use scenario.eval_windows=random, "
             "fewer episodes or a larger trace set"
+        )
+
+
+def check_trace_lengths(
+    traces: str,
+    trace_path: str | None,
+    *,
+    episode_intervals: int,
+    control_interval_s: float,
+) -> None:
+    """Raise :class:`ConfigError` naming the trace setting when a part of the selected traces
+    (training or evaluation) holds no profile long enough for one scenario: the episode plus
+    the twin's look-ahead for VoI rollouts (``episode_intervals + EVAL_LOOKAHEAD_INTERVALS``
+    control intervals). The message gives the length needed, why, and, for a file split in
+    time, how long the file must be. Generated sets always fit. The trace settings must be
+    valid (:func:`check_trace_settings`)."""
+    if trace_path is None:
+        parts = named_sources(traces)
+        key = f"scenario.traces={traces!r}"
+    else:
+        parts = file_sources(traces, trace_path)
+        key = f"scenario.trace_path={trace_path!r} ({traces})"
+    span = (episode_intervals + EVAL_LOOKAHEAD_INTERVALS) * control_interval_s
+    episode_s = episode_intervals * control_interval_s
+    why = (
+        f"{span:g} s (the episode, scenario.episode_intervals={episode_intervals} = "
+        f"{episode_s:g} s, and {span - episode_s:g} s of look-ahead for VoI rollouts)"
+    )
+    for part, source in zip(("train", "eval"), parts, strict=True):
+        if not isinstance(source, ProfileTraceSource) or source.too_short == "reflect":
+            continue
+        durations = source._durations
+        longest = float(durations.max())
+        if longest >= span - 1e-9:
+            continue
+        if TIME_SPLIT_HOW in source.info.description:
+            share = TIME_SPLIT_TRAIN_FRACTION if part == "train" else 1 - TIME_SPLIT_TRAIN_FRACTION
+            need = span / min(TIME_SPLIT_TRAIN_FRACTION, 1 - TIME_SPLIT_TRAIN_FRACTION)
+            raise ConfigError(
+                f"{key} is too short: its {part} part (the {'first' if part == 'train' else 'last'}"
+                f" {share:.0%} of each drive) lasts at most {longest:g} s, and a scenario needs "
+                f"{why}; a run trains on the first {TIME_SPLIT_TRAIN_FRACTION:.0%} and evaluates "
+                f"on the last {1 - TIME_SPLIT_TRAIN_FRACTION:.0%} of a drive, so a drive must "
+                f"last at least {need:g} s; use a longer recording or fewer "
+                "scenario.episode_intervals"
+            )
+        raise ConfigError(
+            f"{key} is too short: no profile of its {part} part ({source.info.description}) "
+            f"lasts {span:g} s (the longest {longest:g} s), and a scenario needs {why}; use "
+            "longer recordings or fewer scenario.episode_intervals"
         )
 
 
