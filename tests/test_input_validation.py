@@ -59,7 +59,7 @@ def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch
 
     t = np.arange(0.0, 60.0, 0.1)
     fake = [SpeedProfile(t, 20.0 + 0 * t, vid, "fake") for vid in ("us101/2", "us101/7")]
-    monkeypatch.setattr(profiles_module, "load_profiles", lambda *a, **k: list(fake))
+    monkeypatch.setitem(profiles_module.LOADERS, "csv", lambda path: list(fake))
     train, evaluation = load_train_eval_sources("csv", "unused.csv")
     assert [p.vehicle_id for p in train.profiles] == ["us101/7"]
     assert [p.vehicle_id for p in evaluation.profiles] == ["us101/2"]
@@ -123,7 +123,7 @@ def test_a_recorded_part_without_a_long_enough_profile_is_refused(monkeypatch):
         SpeedProfile(short_t, 20.0 + 0 * short_t, "us101/2", "fake"),
         SpeedProfile(long_t, 20.0 + 0 * long_t, "us101/7", "fake"),
     ]
-    monkeypatch.setattr(profiles_module, "load_profiles", lambda *a, **k: list(fake))
+    monkeypatch.setitem(profiles_module.LOADERS, "csv", lambda path: list(fake))
     with pytest.raises(ConfigError) as info:
         validate(_cfg(traces="csv", trace_path=__file__, eval_windows="random"))
     assert "no profile of its eval part" in str(info.value), info.value
@@ -283,3 +283,54 @@ def test_a_recorded_trace_set_trains_and_evaluates_on_different_stretches(monkey
     assert "part=eval" in evaluation.info.description
     # generated sets are drawn afresh for every seed: one name serves both
     assert trace_sources(validate(_cfg(traces="synthetic"))) == ("synthetic", "synthetic")
+
+
+def _write_braking_trace(path):
+    """240 s at 15 m/s with a stop at −5 m/s² at t = 100 s (beyond the followers' −2.6)."""
+    t = np.arange(0.0, 240.0 + 1e-9, 0.1)
+    v = np.where(t < 100, 15.0, np.clip(15.0 - 5.0 * (t - 100.0), 0.0, None))
+    v = np.where(t >= 110, np.minimum(1.0 * (t - 110.0), 15.0), v)
+    rows = "\n".join(f"{a:.1f},{b:.4f}" for a, b in zip(t, v, strict=True))
+    path.write_text("time,speed\n" + rows + "\n")
+    return path
+
+
+def test_hard_braking_in_a_trace_file_is_reported_and_can_be_kept(tmp_path):
+    from vdtn_marl.algos.jocc import trace_preprocessing_note
+
+    path = _write_braking_trace(tmp_path / "brake.csv")
+    cfg = validate(_cfg(traces="csv", trace_path=str(path), eval_windows="random"))
+    train, evaluation = trace_sources(cfg)
+    report = train.preprocessing
+    assert report == evaluation.preprocessing  # one file, one report
+    assert report["accel_points_clipped"] > 0 and report["clip_accel_mps2"] == [-2.6, 2.6]
+    assert report["accel_min_before_mps2"] == pytest.approx(-5.0, abs=0.01)
+    assert report["accel_min_after_mps2"] == pytest.approx(-2.6, abs=1e-6)
+    assert min(np.diff(p.speed_mps).min() / 0.1 for p in train.profiles) >= -2.6 - 1e-9
+    note = trace_preprocessing_note(train, cfg)
+    assert note.startswith(f"scenario.trace_path={str(path)!r}") and "\n" not in note
+    assert "5.00 m/s² became 2.60 m/s²" in note and "scenario.trace_accel_clip=none" in note
+    # the leader's recorded deceleration, kept on request
+    kept = validate(_cfg(traces="csv", trace_path=str(path), eval_windows="random",
+                         trace_accel_clip="none"))  # fmt: skip
+    train, _ = trace_sources(kept)
+    assert train.preprocessing["accel_points_clipped"] == 0
+    assert train.preprocessing["clip_accel_mps2"] is None
+    assert min(np.diff(p.speed_mps).min() / 0.1 for p in train.profiles) < -4.5
+    assert trace_preprocessing_note(train, kept) is None
+    # a file that needs no clipping says nothing
+    smooth = validate(_cfg(traces="csv", trace_path=str(_write_trace(tmp_path / "ok.csv", 120.0)),
+                           eval_windows="random"))  # fmt: skip
+    assert trace_preprocessing_note(trace_sources(smooth)[0], smooth) is None
+
+
+@pytest.mark.parametrize(
+    "scenario, key",
+    [
+        (dict(trace_accel_clip="bogus"), "scenario.trace_accel_clip='bogus' is not allowed"),
+        (dict(trace_accel_clip="none"), "scenario.trace_accel_clip='none' applies to a trace"),
+    ],
+)
+def test_bad_trace_accel_clip_is_one_line(scenario, key):
+    with pytest.raises(ConfigError, match=key):
+        validate(_cfg(**scenario))

@@ -48,6 +48,9 @@ class ScenarioConfig:
     # how evaluation cuts windows out of a recorded eval part: disjoint (non-overlapping, order
     # set by the seed; refused when there are too few) or random (independent, may overlap)
     eval_windows: str = "disjoint"
+    # a trace file's acceleration: clipped by pre-processing to the followers' actuator limits
+    # (actuator) or kept as recorded (none: the leader is not bound by those limits)
+    trace_accel_clip: str = "actuator"
     model: dict[str, Any] = field(default_factory=dict)
 
     def model_kwargs(self) -> dict[str, Any]:
@@ -314,6 +317,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _check_task(cfg)
     from vdtn_marl.data.selection import (
         EVAL_WINDOWS,
+        TRACE_ACCEL_CLIPS,
         check_eval_windows,
         check_trace_lengths,
         check_trace_settings,
@@ -321,6 +325,12 @@ def validate(cfg: RunConfig) -> RunConfig:
 
     check_trace_settings(s.traces, s.trace_path)
     _choice("scenario.eval_windows", s.eval_windows, EVAL_WINDOWS)
+    _choice("scenario.trace_accel_clip", s.trace_accel_clip, TRACE_ACCEL_CLIPS)
+    if s.trace_accel_clip != "actuator" and s.trace_path is None:
+        raise ConfigError(
+            f"scenario.trace_accel_clip={s.trace_accel_clip!r} applies to a trace file "
+            "(scenario.trace_path); the shipped trace sets were pre-processed when extracted"
+        )
     p = cfg.twin_params()
     check_trace_lengths(
         s.traces, s.trace_path,

@@ -291,3 +291,29 @@ def test_config_and_environment_accept_the_same_kappa_sums(kappa2, accepted):
             validate(cfg)
         with pytest.raises(ConfigError, match="must equal 1"):
             TwoTimescaleEnv(kappa1=0.3, kappa2=kappa2)
+
+
+@pytest.mark.parametrize("env_id", ENV_IDS)
+def test_every_face_says_why_a_collision_ended_the_episode(env_id):
+    """A follower placed 0.2 m behind its predecessor and 5 m/s faster collides in the next
+    interval: the episode is terminated, and every agent's info carries ``collided``, true for
+    the agents of that follower (its vehicle and the RRA agent of the link that feeds it)."""
+    from dataclasses import replace
+
+    env = vdtn_marl.make(env_id, seed=0, traces="constant")
+    env.reset(seed=0)
+    state = env.twin.platoon
+    position, speed = state.position_m.clone(), state.speed_mps.clone()
+    position[:, 1] = position[:, 0] - env.twin.params.platoon.vehicle_length_m - 0.2
+    speed[:, 1] = speed[:, 0] + 5.0
+    env.twin.platoon = replace(state, position_m=position, speed_mps=speed)
+    terminated = {}
+    for _ in range(2 * T):
+        actions = {a: env.action_space(a).sample() for a in env.agents}
+        _, _, terminated, truncated, infos = env.step(actions)
+        if any(terminated.values()):
+            break
+    assert terminated and all(terminated.values()) and not any(truncated.values()), env_id
+    assert all("collided" in info for info in infos.values()), infos
+    for name, info in infos.items():
+        assert info["collided"] == name.endswith("_1"), (name, info)

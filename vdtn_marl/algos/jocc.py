@@ -29,6 +29,7 @@ Run ``python -m vdtn_marl.algos.jocc`` for one JOCC iteration with the default s
 from __future__ import annotations
 
 import argparse
+import logging
 import sys
 import time
 from dataclasses import asdict
@@ -103,6 +104,8 @@ PER_ITERATION_METRICS = (
     "collision_rate",
     "evoi",
 )
+_log = logging.getLogger(__name__)
+
 #: Evaluation scenarios are seeded apart from every training scenario.
 EVAL_SEED_OFFSET = 1_000_000_000
 LAST_CHECKPOINT = "last.pt"
@@ -128,12 +131,32 @@ def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]
     (:func:`~vdtn_marl.data.selection.named_sources`: a recorded one split in time) or a
     user's file divided into a train and an eval part
     (:func:`~vdtn_marl.data.selection.file_sources`)."""
-    from vdtn_marl.data.selection import file_sources, named_sources
+    from vdtn_marl.data.selection import accel_band, file_sources, named_sources
 
     scenario = cfg.scenario
     if scenario.trace_path is None:
         return named_sources(scenario.traces, scenario.eval_windows)
-    return file_sources(scenario.traces, scenario.trace_path, scenario.eval_windows)
+    platoon = cfg.twin_params().platoon
+    band = accel_band(scenario.trace_accel_clip, platoon.accel_min_mps2, platoon.accel_max_mps2)
+    return file_sources(scenario.traces, scenario.trace_path, scenario.eval_windows, band)
+
+
+def trace_preprocessing_note(source: object, cfg: RunConfig) -> str | None:
+    """One line when pre-processing clipped a trace file's acceleration (what changed, and the
+    setting that keeps the recorded one), else None."""
+    report = getattr(source, "preprocessing", None)
+    if not report or not report.get("accel_points_clipped"):
+        return None
+    lo, hi = report["clip_accel_mps2"]
+    return (
+        f"scenario.trace_path={cfg.scenario.trace_path!r}: pre-processing clipped the "
+        f"acceleration of {report['accel_points_clipped']} of {report['output_points']} samples "
+        f"to [{lo:g}, {hi:g}] m/s² (the followers' actuator limits): the largest deceleration "
+        f"{-report['accel_min_before_mps2']:.2f} m/s² became "
+        f"{-report['accel_min_after_mps2']:.2f} m/s², the largest acceleration "
+        f"{report['accel_max_before_mps2']:.2f} became {report['accel_max_after_mps2']:.2f}; "
+        "scenario.trace_accel_clip=none keeps the recorded ones"
+    )
 
 
 class JointOptimisation:
@@ -158,6 +181,9 @@ class JointOptimisation:
         self.rra_learned = rra.learned
         self.gamma = algo.gamma
         self.train_traces, self.eval_traces = trace_sources(cfg)
+        note = trace_preprocessing_note(self.train_traces, cfg)
+        if note:
+            _log.warning(note)
         env_kw: dict[str, Any] = dict(
             batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
             trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
@@ -586,6 +612,9 @@ class JointOptimisation:
             "control": self.cfg.control.name,
             "scenario": self.cfg.scenario.name,
             "traces": self.cfg.scenario.traces,
+            "trace_path": self.cfg.scenario.trace_path,
+            # what pre-processing changed in a trace file (samples clipped, accelerations)
+            "trace_preprocessing": getattr(self.train_traces, "preprocessing", None),
             "iterations": self.position["iteration"],
             "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
             # with algo.validate_every: the trainer iteration whose weights each stage kept

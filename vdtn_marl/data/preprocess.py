@@ -23,7 +23,8 @@
    - ``"none"``: no smoothing.
 
 5. **Speed clipping** to [0, ``max_speed_mps``] (smoothing can overshoot below 0 at stops).
-6. **Acceleration clipping**: the profile is re-integrated forward so every step's
+6. **Acceleration clipping** (unless ``clip_accel_mps2=None``, which keeps the recorded
+   acceleration): the profile is re-integrated forward so every step's
    acceleration lies in ``clip_accel_mps2`` (m/s²), i.e. ``v[k+1] = v[k] + dt · clip((x[k+1] −
    v[k]) / dt, a_min, a_max)`` (and kept inside the speed band), which follows the input
    wherever it is physically reachable.
@@ -42,6 +43,9 @@ Smoothing = Literal["savgol", "ema", "none"]
 GAP_FACTOR = 1.5
 """A time step longer than this multiple of the nominal step counts as a gap."""
 DUPLICATE_TOL_S = 1e-6
+DEFAULT_CLIP_ACCEL_MPS2 = (-2.6, 2.6)
+"""The acceleration band (m/s²) :func:`preprocess` clips to by default: the followers' actuator
+limits (:class:`~vdtn_marl.sim.params.PlatoonParams`)."""
 
 
 @dataclass
@@ -57,6 +61,9 @@ class PreprocessReport:
         segments_dropped: segments discarded for being shorter than ``min_segment_s``.
         speed_points_clipped: grid points whose smoothed speed left [0, max_speed_mps].
         accel_points_clipped: grid steps whose acceleration was clipped.
+        accel_min_before_mps2 / accel_max_before_mps2: the extreme accelerations (m/s²) of the
+            resampled input, before smoothing and clipping (0 with no segment).
+        accel_min_after_mps2 / accel_max_after_mps2: the same of the output.
         smoothing_rms_change_mps: RMS of (smoothed − resampled) speed in m/s, over all segments.
         nominal_dt_s / dt_s: the input's median step and the output grid step, in s.
         segments: the output segments' ids.
@@ -71,6 +78,10 @@ class PreprocessReport:
     segments_dropped: int = 0
     speed_points_clipped: int = 0
     accel_points_clipped: int = 0
+    accel_min_before_mps2: float = 0.0
+    accel_max_before_mps2: float = 0.0
+    accel_min_after_mps2: float = 0.0
+    accel_max_after_mps2: float = 0.0
     smoothing: str = "none"
     smoothing_rms_change_mps: float = 0.0
     nominal_dt_s: float = float("nan")
@@ -88,7 +99,7 @@ def preprocess(
     max_gap_s: float = 1.0,
     min_segment_s: float = 5.0,
     max_speed_mps: float = MAX_SPEED_MPS,
-    clip_accel_mps2: tuple[float, float] = (-2.6, 2.6),
+    clip_accel_mps2: tuple[float, float] | None = DEFAULT_CLIP_ACCEL_MPS2,
 ) -> tuple[list[SpeedProfile], PreprocessReport]:
     """Clean one profile; returns the cleaned segments (on uniform grids) and a report.
 
@@ -103,7 +114,8 @@ def preprocess(
         max_gap_s: longest gap in s that is interpolated rather than split.
         min_segment_s: shortest segment in s that is kept.
         max_speed_mps: upper speed clip in m/s.
-        clip_accel_mps2: ``(a_min, a_max)`` in m/s², with ``a_min < 0 < a_max``.
+        clip_accel_mps2: ``(a_min, a_max)`` in m/s², with ``a_min < 0 < a_max``; ``None``
+            keeps the recorded acceleration (step 6 is skipped).
     """
     _check_args(smoothing, window_s, polyorder, dt_s, max_gap_s, min_segment_s, clip_accel_mps2)
     t = np.asarray(profile.time_s, dtype=np.float64)
@@ -146,8 +158,17 @@ def preprocess(
         outside = (smooth < 0.0) | (smooth > max_speed_mps)
         report.speed_points_clipped += int(np.count_nonzero(outside))
         smooth = np.clip(smooth, 0.0, max_speed_mps)
-        limited, n_clipped = limit_acceleration(smooth, grid_dt, clip_accel_mps2, max_speed_mps)
+        if clip_accel_mps2 is None:
+            limited, n_clipped = smooth, 0
+        else:
+            limited, n_clipped = limit_acceleration(smooth, grid_dt, clip_accel_mps2, max_speed_mps)
         report.accel_points_clipped += n_clipped
+        for when, speed in (("before", raw), ("after", limited)):
+            accel = np.diff(speed) / grid_dt
+            if accel.size:
+                lo, hi = f"accel_min_{when}_mps2", f"accel_max_{when}_mps2"
+                setattr(report, lo, min(getattr(report, lo), float(accel.min())))
+                setattr(report, hi, max(getattr(report, hi), float(accel.max())))
         seg_id = f"{profile.vehicle_id}#{len(out)}" if len(bounds) else profile.vehicle_id
         out.append(SpeedProfile(grid, limited, seg_id, profile.source))
     report.smoothing_rms_change_mps = float(np.sqrt(sq_change / n_change)) if n_change else 0.0
@@ -167,6 +188,30 @@ def preprocess_all(
         segments.extend(segs)
         reports.append(rep)
     return segments, reports
+
+
+def summarize_reports(reports: list[PreprocessReport]) -> dict[str, object]:
+    """What pre-processing changed over a file, as plain data (for a run's summary): profiles
+    and samples in and out, samples whose speed or acceleration was clipped, and the extreme
+    accelerations (m/s²) before and after."""
+
+    def extreme(key: str, pick) -> float:
+        values = [getattr(r, key) for r in reports]
+        return float(pick(values)) if values else 0.0
+
+    return {
+        "profiles": len(reports),
+        "segments": sum(len(r.segments) for r in reports),
+        "input_points": sum(r.input_points for r in reports),
+        "output_points": sum(r.output_points for r in reports),
+        "speed_points_clipped": sum(r.speed_points_clipped for r in reports),
+        "accel_points_clipped": sum(r.accel_points_clipped for r in reports),
+        "accel_min_before_mps2": extreme("accel_min_before_mps2", min),
+        "accel_min_after_mps2": extreme("accel_min_after_mps2", min),
+        "accel_max_before_mps2": extreme("accel_max_before_mps2", max),
+        "accel_max_after_mps2": extreme("accel_max_after_mps2", max),
+        "smoothing": reports[0].smoothing if reports else "none",
+    }
 
 
 def limit_acceleration(
@@ -226,7 +271,7 @@ def _check_args(
     dt_s: float | None,
     max_gap_s: float,
     min_segment_s: float,
-    clip_accel_mps2: tuple[float, float],
+    clip_accel_mps2: tuple[float, float] | None,
 ) -> None:
     if smoothing not in ("savgol", "ema", "none"):
         raise ValueError(f"smoothing={smoothing!r} must be one of 'savgol', 'ema', 'none'")
@@ -238,6 +283,8 @@ def _check_args(
         raise ValueError(f"dt_s={dt_s} must be > 0 s")
     if not max_gap_s >= 0 or not min_segment_s >= 0:
         raise ValueError(f"max_gap_s={max_gap_s} and min_segment_s={min_segment_s} must be >= 0")
+    if clip_accel_mps2 is None:
+        return
     lo, hi = clip_accel_mps2
     if not lo < 0 < hi:
         raise ValueError(f"clip_accel_mps2={clip_accel_mps2} must satisfy a_min < 0 < a_max")

@@ -20,7 +20,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.data.loaders import LOADERS, SpeedProfile
-from vdtn_marl.data.preprocess import preprocess_all
+from vdtn_marl.data.preprocess import DEFAULT_CLIP_ACCEL_MPS2, preprocess_all, summarize_reports
 from vdtn_marl.data.traces import TraceInfo
 
 NGSIM_LICENSE = (
@@ -123,6 +123,9 @@ class ProfileTraceSource:
                 raise ValueError(f"profile {p.vehicle_id!r} has negative speeds")
         self.profiles = usable
         self.too_short = too_short
+        #: what pre-processing changed in the file these profiles were read from (plain data,
+        #: :func:`~vdtn_marl.data.preprocess.summarize_reports`), or None
+        self.preprocessing: dict[str, Any] | None = None
         self.eval_vehicles = None if eval_vehicles is None else frozenset(eval_vehicles)
         self._times = [p.time_s - p.time_s[0] for p in usable]
         self._durations = np.array([p.duration_s for p in usable])
@@ -187,6 +190,19 @@ def load_profiles(
     ``loader_kw`` go to the reader (e.g. ``vehicle_ids``, ``min_duration_s``,
     ``speed_range_mps``), ``preprocess_kw`` to :func:`~vdtn_marl.data.preprocess.preprocess`.
     """
+    profiles, _ = _read_clean(kind, path, clean, preprocess_kw, loader_kw)
+    return split(profiles, part)
+
+
+def _read_clean(
+    kind: str,
+    path: str | Path,
+    clean: bool,
+    preprocess_kw: dict[str, Any] | None,
+    loader_kw: dict[str, Any],
+) -> tuple[list[SpeedProfile], dict[str, Any] | None]:
+    """The file's profiles, cleaned if ``clean``, and what cleaning changed
+    (:func:`~vdtn_marl.data.preprocess.summarize_reports`; ``None`` when not cleaned)."""
     try:
         loader = LOADERS[kind]
     except KeyError:
@@ -199,9 +215,14 @@ def load_profiles(
             f"allowed: {', '.join(allowed)}"
         )
     profiles = loader(path, **loader_kw)
-    if clean:
-        profiles, _ = preprocess_all(profiles, **(preprocess_kw or {}))
-    return split(profiles, part)
+    if not clean:
+        return profiles, None
+    kw = dict(preprocess_kw or {})
+    profiles, reports = preprocess_all(profiles, **kw)
+    summary = summarize_reports(reports)
+    band = kw.get("clip_accel_mps2", DEFAULT_CLIP_ACCEL_MPS2)
+    summary["clip_accel_mps2"] = None if band is None else [float(b) for b in band]
+    return profiles, summary
 
 
 def load_trace_source(
@@ -223,11 +244,11 @@ def load_trace_source(
     """
     if part not in ("train", "eval", "all"):
         raise ValueError(f"part={part!r} must be 'train', 'eval' or 'all'")
-    profiles = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
+    profiles, cleaning = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
     if part == "all":
-        return _file_source(kind, path, profiles, "part=all", too_short)
+        return _file_source(kind, path, profiles, "part=all", too_short, cleaning)
     parts, how = train_eval_parts(profiles)
-    return _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
+    return _file_source(kind, path, parts[part], f"part={part}, {how}", too_short, cleaning)
 
 
 def _selected_profiles(
@@ -236,21 +257,25 @@ def _selected_profiles(
     clean: bool,
     preprocess_kw: dict[str, Any] | None,
     loader_kw: dict[str, Any],
-) -> list[SpeedProfile]:
-    """Every profile of the file that passes selection and cleaning (raises if none does)."""
-    profiles = load_profiles(
-        kind, path, part="all", clean=clean, preprocess_kw=preprocess_kw, **loader_kw
-    )
+) -> tuple[list[SpeedProfile], dict[str, Any] | None]:
+    """Every profile of the file that passes selection and cleaning (raises if none does),
+    and what cleaning changed (as :func:`_read_clean`)."""
+    profiles, cleaning = _read_clean(kind, path, clean, preprocess_kw, loader_kw)
     if not profiles:
         raise ValueError(
             f"{Path(path).name}: no {kind} profile left after selection and cleaning; "
             "loosen the selection (e.g. min_duration_s, speed_range_mps)"
         )
-    return profiles
+    return profiles, cleaning
 
 
 def _file_source(
-    kind: str, path: str | Path, profiles: list[SpeedProfile], how: str, too_short: TooShort
+    kind: str,
+    path: str | Path,
+    profiles: list[SpeedProfile],
+    how: str,
+    too_short: TooShort,
+    cleaning: dict[str, Any] | None = None,
 ) -> ProfileTraceSource:
     """A source over ``profiles`` read from ``path``; ``how`` says which part of the file."""
     info = TraceInfo(
@@ -260,7 +285,9 @@ def _file_source(
         source=profiles[0].source,
         license=FILE_LICENSES.get(kind, ""),
     )
-    return ProfileTraceSource(profiles, info, too_short=too_short)
+    source = ProfileTraceSource(profiles, info, too_short=too_short)
+    source.preprocessing = cleaning
+    return source
 
 
 TIME_SPLIT_TRAIN_FRACTION = 1.0 - 1.0 / EVAL_MODULUS
@@ -446,10 +473,10 @@ def load_train_eval_sources(
 
     The parts are those of :func:`train_eval_parts`.
     """
-    profiles = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
+    profiles, cleaning = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
     parts, how = train_eval_parts(profiles)
     train, evaluation = (
-        _file_source(kind, path, parts[part], f"part={part}, {how}", too_short)
+        _file_source(kind, path, parts[part], f"part={part}, {how}", too_short, cleaning)
         for part in ("train", "eval")
     )
     return train, evaluation

@@ -23,6 +23,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from vdtn_marl.data.loaders import LOADERS
+from vdtn_marl.data.preprocess import DEFAULT_CLIP_ACCEL_MPS2
 from vdtn_marl.data.profiles import (
     TIME_SPLIT_HOW,
     TIME_SPLIT_TRAIN_FRACTION,
@@ -39,6 +40,8 @@ FILE_FORMATS = tuple(sorted(LOADERS))
 """Values of ``scenario.traces`` that read ``scenario.trace_path``."""
 EVAL_WINDOWS = ("random", "disjoint")
 """Values of ``scenario.eval_windows`` (:func:`eval_source`)."""
+TRACE_ACCEL_CLIPS = ("actuator", "none")
+"""Values of ``scenario.trace_accel_clip`` (:func:`accel_band`)."""
 EVAL_LOOKAHEAD_INTERVALS = 200
 """Look-ahead of the evaluation twin beyond the episode, in control intervals (the default of
 :class:`~vdtn_marl.sim.twin.DigitalTwin`, which evaluation uses)."""
@@ -201,19 +204,38 @@ def check_trace_lengths(
         )
 
 
+def accel_band(
+    trace_accel_clip: str, accel_min_mps2: float, accel_max_mps2: float
+) -> tuple[float, float] | None:
+    """The acceleration band (m/s²) pre-processing clips a trace file to for
+    ``scenario.trace_accel_clip``: the followers' actuator limits (``actuator``) or none."""
+    if trace_accel_clip not in TRACE_ACCEL_CLIPS:
+        raise ConfigError(
+            f"scenario.trace_accel_clip={trace_accel_clip!r} is not allowed; choose one of "
+            f"{', '.join(TRACE_ACCEL_CLIPS)}"
+        )
+    return None if trace_accel_clip == "none" else (accel_min_mps2, accel_max_mps2)
+
+
 def file_sources(
-    kind: str, trace_path: str, eval_windows: str = "random"
+    kind: str,
+    trace_path: str,
+    eval_windows: str = "random",
+    clip_accel_mps2: tuple[float, float] | None = DEFAULT_CLIP_ACCEL_MPS2,
 ) -> tuple[ProfileTraceSource, ProfileTraceSource | DisjointWindowSource]:
     """Training and evaluation sources of a user's trace file; :class:`ConfigError` naming
     ``scenario.trace_path`` if it is missing or cannot be read as ``kind``. ``eval_windows``
-    as in :func:`eval_source`."""
+    as in :func:`eval_source`; ``clip_accel_mps2`` is pre-processing's acceleration band
+    (:func:`accel_band`; ``None`` keeps the recorded acceleration). Both sources carry what
+    pre-processing changed (``source.preprocessing``)."""
     check_eval_windows_value(eval_windows)
     path = Path(trace_path).expanduser()
     if not path.is_file():
         raise ConfigError(f"scenario.trace_path={trace_path!r} is not a file")
     stat = path.stat()
     try:
-        train, evaluation = _read(kind, str(path.resolve()), stat.st_mtime_ns, stat.st_size)
+        band = None if clip_accel_mps2 is None else tuple(float(b) for b in clip_accel_mps2)
+        train, evaluation = _read(kind, str(path.resolve()), stat.st_mtime_ns, stat.st_size, band)
     except (ValueError, OSError) as exc:  # TraceFormatError is a ValueError
         raise ConfigError(f"scenario.trace_path={trace_path!r} ({kind}): {exc}") from None
     return train, eval_source(evaluation, eval_windows)
@@ -221,7 +243,8 @@ def file_sources(
 
 @lru_cache(maxsize=4)
 def _read(
-    kind: str, path: str, mtime_ns: int, size: int
+    kind: str, path: str, mtime_ns: int, size: int, band: tuple[float, ...] | None
 ) -> tuple[ProfileTraceSource, ProfileTraceSource]:
-    """Cached per file version (the sources are stateless: draws come from the caller)."""
-    return load_train_eval_sources(kind, path)
+    """Cached per file version and band (the sources are stateless: draws come from the
+    caller)."""
+    return load_train_eval_sources(kind, path, preprocess_kw={"clip_accel_mps2": band})

@@ -182,8 +182,10 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         """Same keys at every step (TorchRL's PettingZooWrapper builds its spec at reset).
 
         ``rra_i``: ``acts``, ``v2i_throughput_mbps`` (this subframe), ``closes_interval``,
-        ``ivoi`` (ξ_i at the closing step, 0 otherwise) and the CAM outcome of link i's last
-        finished interval. ``vehicle_i``: ``acts`` and the diagnostics of its last interval.
+        ``ivoi`` (ξ_i at the closing step, 0 otherwise), the CAM outcome of link i's last
+        finished interval and ``collided`` (whether link i's recipient collided then: the
+        reason an episode is terminated). ``vehicle_i``: ``acts`` and the diagnostics of its
+        last interval.
         """
         if closing is not None:
             self._last_closing = closing
@@ -199,6 +201,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
                 "ivoi": ivoi[i] if ivoi is not None else 0.0,
                 "cam_delivered": recipient["cam_delivered"],
                 "cam_delay_ms": recipient["cam_delay_ms"],
+                "collided": recipient["collided"],  # why an episode ends (terminated)
             }
         if self.vehicles_are_agents:
             for name in self.vehicle_agents:
