@@ -47,10 +47,12 @@ def installed(tmp_path_factory):
     dist = tmp / "dist"
     build = _run(
         [sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation",
-         "--disable-pip-version-check", "-q", "-w", dist, src],
+         "--disable-pip-version-check", "-w", dist, src],
         cwd=tmp,
     )  # fmt: skip
     assert build.returncode == 0, build.stdout + build.stderr
+    # a first install is quiet: no setuptools banner (e.g. a data folder not in `packages`)
+    assert "Warning" not in build.stdout + build.stderr, build.stdout + build.stderr
     (wheel,) = dist.glob("vdtn_marl-*.whl")
 
     venv = tmp / "venv"
