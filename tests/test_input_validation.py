@@ -77,11 +77,13 @@ def test_a_file_whose_vehicles_fall_in_both_parts_keeps_the_id_split(monkeypatch
         (dict(traces="csv", trace_path="no/such.csv"), "scenario.trace_path='no/such.csv'"),
         (dict(traces="csv", trace_path="bad.csv"), "bad.csv row 3: time 1 s is earlier"),
         (dict(traces="ngsim", trace_path="drive.csv"), "(ngsim)"),
+        (dict(traces="csv", trace_path="one.csv"), "one.csv is too short: its longest drive"),
     ],
 )
 def test_bad_trace_settings_are_config_errors(scenario, fragment, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     _write_trace(tmp_path / "drive.csv")
+    (tmp_path / "one.csv").write_text("time,speed\n0,10\n")
     (tmp_path / "bad.csv").write_text("time,speed\n0,10\n2,10\n1,10\n")
     with pytest.raises(ConfigError) as info:
         validate(_cfg(**scenario))

@@ -29,3 +29,21 @@ def test_labels_of_coinciding_points_are_stacked_a_line_apart():
 
 def test_labels_of_distant_points_stay_at_their_points():
     assert _offsets([1.0, 9.0, 5.0], [1.0, 9.0, 5.0]) == [0.0, 0.0, 0.0]
+
+
+def test_the_summary_table_never_cuts_a_long_value():
+    """A checkpoint path longer than the terminal wraps onto more lines instead of ending in …"""
+    import io
+    import re
+
+    from rich.console import Console
+
+    from vdtn_marl import results
+
+    path = "/very/long/folder/of/runs/" + "x" * 90 + "/checkpoints/last.pt"
+    out = io.StringIO()
+    results.print_summary({"checkpoint": path, "seed": 3}, console=Console(file=out, width=60))
+    text = out.getvalue()
+    assert "…" not in text
+    joined = re.sub(r"[\s│┃|]", "", text)
+    assert path in joined

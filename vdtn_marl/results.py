@@ -405,8 +405,8 @@ def print_summary(summary: Mapping[str, Any], console: Any = None, title: str = 
 
     console = console or Console()
     rich_table = Table(title=title)
-    rich_table.add_column("metric")
-    rich_table.add_column("value", justify="right")
+    rich_table.add_column("metric", overflow="fold")
+    rich_table.add_column("value", justify="right", overflow="fold")  # a path wraps, never cut
     for key, value in flatten(metrics_of(summary)).items():
         if isinstance(value, list | tuple):
             continue

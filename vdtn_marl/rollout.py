@@ -75,8 +75,8 @@ def print_table(results: dict[str, float], title: str) -> None:
             print(f"  {key:<34} {format_value(value):>10}")
         return
     table = Table(title=title)
-    table.add_column("metric")
-    table.add_column("value", justify="right")
+    table.add_column("metric", overflow="fold")
+    table.add_column("value", justify="right", overflow="fold")
     for key, value in results.items():
         table.add_row(key, format_value(value))
     Console().print(table)

@@ -226,6 +226,9 @@ def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):
     assert summary["trainer_iterations"] == {"pi_star": 1, "pi_tilde": 1, "rra": 2}
     assert (summary["kappa1"], summary["kappa2"]) == (cfg.rra.kappa1, cfg.rra.kappa2_value)
     assert summary["traces"] == cfg.scenario.traces == "cmap"
+    assert summary["trace_path"] is None and summary["trace_preprocessing"] is None
+    # `task` picks the stage of `vdtn-marl train`: a jocc run's summary does not claim one
+    assert summary["task"] == "jocc" and "task" not in summary["config"]
     payload = load_checkpoint(tmp_path / "checkpoints" / "last.pt", to_dict(cfg))
     assert payload["position"]["iteration"] == 1
 
@@ -243,7 +246,8 @@ def test_summary_lists_each_jocc_iterations_evaluation(tmp_path):
 
 def test_truncated_foreign_and_mismatched_checkpoints_raise(tmp_path):
     cfg = tiny_config(experiment=replace(TINY_EXPERIMENT, control_iterations=1))
-    JointOptimisation(cfg, tmp_path, task="control").run()
+    summary = JointOptimisation(cfg, tmp_path, task="control").run()
+    assert summary["task"] == summary["config"]["task"] == "control"
     good = tmp_path / "checkpoints" / "last.pt"
     data = good.read_bytes()
 

@@ -171,7 +171,7 @@ def test_load_trace_source_kinds(write_text, write_ngsim):
     assert x.shape == (3, 101) and (x >= 15.0 - 1e-4).all() and (x <= 15.6 + 1e-4).all()
     with pytest.raises(ValueError, match="kind='ngsimm'"):
         load_trace_source("ngsimm", path)
-    with pytest.raises(ValueError, match="no ngsim profile left"):
+    with pytest.raises(ValueError, match="min_duration_s=60.0"):
         load_trace_source("ngsim", _ngsim_file(write_ngsim, 2, 10), min_duration_s=60.0)
 
 
@@ -180,7 +180,7 @@ def test_selection_keywords_work_for_every_format_and_unknown_ones_are_named(wri
         "drive.csv", "time,speed\n" + "".join(f"{t},{15 + 0.01 * t}\n" for t in range(61))
     )
     assert len(load_trace_source("csv", path, min_duration_s=60, speed_range_mps=(5, 30))) == 1
-    with pytest.raises(ValueError, match="no csv profile left"):
+    with pytest.raises(ValueError, match="min_duration_s=61"):
         load_trace_source("csv", path, min_duration_s=61)
     with pytest.raises(ValueError, match=r"^frame_rate_hz=25 is not a keyword of the 'csv' "):
         load_trace_source("csv", path, frame_rate_hz=25)

@@ -213,6 +213,8 @@ def test_impaired_env_uses_given_rra_policy():
         ("left", r"vehicle_2 = 'left' must be one number \(m/s²\) in \[-2.6, 2.6\]"),
         ("1.5", r"vehicle_2 = '1.5' must be one number"),  # not read as 1.5 m/s²
         (None, r"vehicle_2 = None must be one number"),
+        (0.5, r"vehicle_2 = 0.5 has shape \(\), expected \(1,\)"),  # as Box(1,).contains
+        (np.float32(0.5), r"shape \(\), expected \(1,\)"),
     ],
 )
 def test_bad_vehicle_actions_raise(action, fragment):

@@ -628,8 +628,16 @@ class JointOptimisation:
                 {k: row.get(k) for k in PER_ITERATION_METRICS if k in row}
                 for row in self.eval_log.rows
             ],
-            "config": to_dict(self.cfg),
+            "config": self._summary_config(),
         }
+
+    def _summary_config(self) -> dict[str, Any]:
+        """The run's config for its summary: ``task`` (a key of ``vdtn-marl train``, which
+        picks one stage) only where the run is one stage; a jocc run's task is the summary's."""
+        config = to_dict(self.cfg)
+        if self.task == "jocc":
+            config.pop("task", None)
+        return config
 
 
 def format_table(row: dict[str, Any]) -> str:

@@ -43,6 +43,8 @@ Smoothing = Literal["savgol", "ema", "none"]
 GAP_FACTOR = 1.5
 """A time step longer than this multiple of the nominal step counts as a gap."""
 DUPLICATE_TOL_S = 1e-6
+DEFAULT_MIN_SEGMENT_S = 5.0
+"""The shortest stretch (s) :func:`preprocess` keeps by default."""
 DEFAULT_CLIP_ACCEL_MPS2 = (-2.6, 2.6)
 """The acceleration band (m/s²) :func:`preprocess` clips to by default: the followers' actuator
 limits (:class:`~vdtn_marl.sim.params.PlatoonParams`)."""
@@ -97,7 +99,7 @@ def preprocess(
     polyorder: int = 2,
     dt_s: float | None = None,
     max_gap_s: float = 1.0,
-    min_segment_s: float = 5.0,
+    min_segment_s: float = DEFAULT_MIN_SEGMENT_S,
     max_speed_mps: float = MAX_SPEED_MPS,
     clip_accel_mps2: tuple[float, float] | None = DEFAULT_CLIP_ACCEL_MPS2,
 ) -> tuple[list[SpeedProfile], PreprocessReport]:

@@ -20,7 +20,12 @@ import numpy as np
 import torch
 
 from vdtn_marl.data.loaders import LOADERS, SpeedProfile
-from vdtn_marl.data.preprocess import DEFAULT_CLIP_ACCEL_MPS2, preprocess_all, summarize_reports
+from vdtn_marl.data.preprocess import (
+    DEFAULT_CLIP_ACCEL_MPS2,
+    DEFAULT_MIN_SEGMENT_S,
+    preprocess_all,
+    summarize_reports,
+)
 from vdtn_marl.data.traces import TraceInfo
 
 NGSIM_LICENSE = (
@@ -218,8 +223,11 @@ def _read_clean(
     if not clean:
         return profiles, None
     kw = dict(preprocess_kw or {})
+    raw_longest = max((p.duration_s for p in profiles), default=0.0)
     profiles, reports = preprocess_all(profiles, **kw)
     summary = summarize_reports(reports)
+    summary["longest_input_s"] = float(raw_longest)
+    summary["min_segment_s"] = float(kw.get("min_segment_s", DEFAULT_MIN_SEGMENT_S))
     band = kw.get("clip_accel_mps2", DEFAULT_CLIP_ACCEL_MPS2)
     summary["clip_accel_mps2"] = None if band is None else [float(b) for b in band]
     return profiles, summary
@@ -261,12 +269,19 @@ def _selected_profiles(
     """Every profile of the file that passes selection and cleaning (raises if none does),
     and what cleaning changed (as :func:`_read_clean`)."""
     profiles, cleaning = _read_clean(kind, path, clean, preprocess_kw, loader_kw)
-    if not profiles:
+    if profiles:
+        return profiles, cleaning
+    name = Path(path).name
+    if cleaning and cleaning["profiles"]:  # read, then every stretch was too short to keep
         raise ValueError(
-            f"{Path(path).name}: no {kind} profile left after selection and cleaning; "
-            "loosen the selection (e.g. min_duration_s, speed_range_mps)"
+            f"{name} is too short: its longest drive lasts {cleaning['longest_input_s']:g} s, "
+            f"and pre-processing keeps stretches of at least {cleaning['min_segment_s']:g} s "
+            "(a scenario needs far more: an episode and its look-ahead)"
         )
-    return profiles, cleaning
+    if loader_kw:
+        chosen = ", ".join(f"{k}={v!r}" for k, v in sorted(loader_kw.items()))
+        raise ValueError(f"{name}: no {kind} profile passes the selection ({chosen}); loosen it")
+    raise ValueError(f"{name} holds no {kind} profile")
 
 
 def _file_source(

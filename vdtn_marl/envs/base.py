@@ -160,8 +160,12 @@ class VDTNParallelEnv(ParallelEnv):
                     f"[{pp.accel_min_mps2}, {pp.accel_max_mps2}]"
                 )
             value = value.astype(np.float64, copy=False)
-            if value.shape not in ((1,), ()):
-                raise ValueError(f"action of {name} has shape {value.shape}, expected (1,)")
+            if value.shape != (1,):  # as Box(1,).contains: a bare number is refused too
+                raise ValueError(
+                    f"action of {name} = {actions[name]!r} has shape {value.shape}, expected "
+                    f"(1,): one number (m/s²) in [{pp.accel_min_mps2}, {pp.accel_max_mps2}] in "
+                    "an array, e.g. np.array([0.5], np.float32)"
+                )
             u = float(value.reshape(()))
             if not (pp.accel_min_mps2 <= u <= pp.accel_max_mps2):  # also rejects NaN
                 raise ValueError(
