@@ -257,17 +257,24 @@ def run_job(command: str, cfg: Any) -> dict:
 
     from vdtn_marl import results
     from vdtn_marl.algos import api
+    from vdtn_marl.algos.checkpoint import CheckpointError
     from vdtn_marl.runs import (
         CONFIG_FILE,
+        RunFileError,
+        RunWriteError,
         atomic_write_text,
         check_interrupt,
         graceful_interrupts,
         keep_log_off_console,
+        run_lock,
     )
 
     run_dir = Path(HydraConfig.get().runtime.output_dir)
     try:  # Ctrl-C from here on stops at a safe point of the run (vdtn_marl.runs)
-        with graceful_interrupts(lambda: interrupted_message(command, run_dir)):
+        with (
+            graceful_interrupts(lambda: interrupted_message(command, run_dir)),
+            run_lock(run_dir),  # before anything is written: a second launcher is refused
+        ):
             data = job_config(cfg)
             run_cfg = to_run_config(data, command)
             keep_log_off_console(run_cfg.progress)
@@ -280,6 +287,13 @@ def run_job(command: str, cfg: Any) -> dict:
     except KeyboardInterrupt:
         print(interrupted_message(command, run_dir), file=sys.stderr)
         raise SystemExit(EXIT_INTERRUPTED) from None
+    except (RunFileError, CheckpointError) as exc:  # a run folder that cannot be continued
+        print(f"error: {exc}", file=sys.stderr)
+        raise SystemExit(EXIT_CONFIG_ERROR) from None
+    except RunWriteError as exc:  # a full disk, say: every file is whole (runs.py)
+        hint = interrupted_message(command, run_dir).removeprefix("interrupted; ")
+        print(f"error: {exc.strerror}; {hint}", file=sys.stderr)
+        raise SystemExit(1) from None
     if HydraConfig.get().mode == RunMode.MULTIRUN:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
         return summary

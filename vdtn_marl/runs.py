@@ -54,12 +54,29 @@ def run_outputs(run_dir: str | Path) -> list[str]:
     return [name for name in RUN_OUTPUTS if (Path(run_dir) / name).exists()]
 
 
+class RunFileError(ValueError):
+    """A file of a run (metrics, evaluation, summary) that cannot be used to continue it; the
+    message names the file, the problem and what to do."""
+
+
+class RunWriteError(OSError):
+    """A run's file could not be written (a full disk, say); the previous version of the file,
+    if any, is intact. The message names the file and the cause."""
+
+
+#: Temporary files of :func:`atomic_write_bytes` (``.<name>.<random>.tmp``).
+TEMP_PATTERN = ".*.tmp"
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
-    """Write ``data`` to ``path`` atomically (temporary file + ``os.replace``)."""
+    """Write ``data`` to ``path`` atomically (temporary file + ``os.replace``): a reader, or a
+    run killed at any point, sees the old file or the new one, never a part. An ``OSError``
+    (no space left, say) comes out as :class:`RunWriteError` naming ``path``."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    tmp = None
     try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)  # mkstemp creates 0600; give the usual file mode
@@ -68,10 +85,78 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
             handle.flush()
             os.fsync(handle.fileno())
         os.replace(tmp, path)
+    except OSError as exc:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        if isinstance(exc, RunWriteError):
+            raise
+        kept = "its previous version is intact" if path.exists() else "nothing was written"
+        raise RunWriteError(
+            exc.errno, f"cannot write {path}: {exc.strerror or exc}; {kept}"
+        ) from exc
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+def remove_stale_temp_files(run_dir: str | Path) -> list[Path]:
+    """Remove the temporary files a killed writer left in ``run_dir`` (and its checkpoint
+    folder); returns them. Only call it while holding the run's lock (:func:`run_lock`)."""
+    run_dir = Path(run_dir)
+    stale = [*run_dir.glob(TEMP_PATTERN), *(run_dir / CHECKPOINT_DIR).glob(TEMP_PATTERN)]
+    for path in stale:
+        path.unlink(missing_ok=True)
+    return stale
+
+
+LOCK_FILE = ".lock"
+_HELD_LOCKS: dict[Path, list] = {}  # run dir → [open lock file, depth]
+
+
+@contextlib.contextmanager
+def run_lock(run_dir: str | Path) -> Iterator[None]:
+    """Hold ``run_dir``'s lock (an exclusive ``flock`` on ``run_dir/.lock``, released when the
+    process ends however it ends): a second process that tries to run in the same folder gets
+    :class:`RunFileError` naming the folder and the holder's pid. Re-entrant in one process;
+    a no-op where ``fcntl`` is missing (Windows)."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        yield
+        return
+    key = Path(run_dir).resolve()
+    held = _HELD_LOCKS.get(key)
+    if held is not None:
+        held[1] += 1
+        try:
+            yield
+        finally:
+            held[1] -= 1
+        return
+    key.mkdir(parents=True, exist_ok=True)
+    handle = open(key / LOCK_FILE, "a+", encoding="utf-8")  # noqa: SIM115 - held until exit
+    try:
+        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.seek(0)
+        holder = handle.read().strip() or "unknown"
+        handle.close()
+        raise RunFileError(
+            f"{key} is in use by another run (pid {holder}): two launchers must not write "
+            "into one run directory; wait for it to end or pick another directory"
+        ) from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"{os.getpid()}\n")
+    handle.flush()
+    _HELD_LOCKS[key] = [handle, 1]
+    try:
+        yield
+    finally:
+        del _HELD_LOCKS[key]
+        handle.close()  # releases the flock
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
@@ -104,6 +189,48 @@ def atomic_write_json(path: str | Path, data: Any) -> Path:
 def read_json(path: str | Path) -> Any:
     with open(path, encoding="utf-8") as handle:
         return json.load(handle)
+
+
+def read_csv_rows(path: str | Path) -> list[dict[str, str]]:
+    """The rows of a run's CSV table (:class:`MetricsLog`); :class:`RunFileError` naming the
+    file and the first bad row when it is not a whole table (binary, cut, fields that do not
+    match the header)."""
+    try:
+        with open(path, newline="", encoding="utf-8") as handle:
+            reader = csv.DictReader(handle)
+            rows = list(reader)
+            header = reader.fieldnames or []
+    except (csv.Error, UnicodeDecodeError, ValueError) as exc:
+        raise RunFileError(
+            f"{path} is damaged ({exc}); restore it, or start the run again in another directory"
+        ) from None
+    for number, row in enumerate(rows, start=2):
+        if None in row or any(value is None for value in row.values()) or "\0" in str(row):
+            raise RunFileError(
+                f"{path} is damaged: row {number} does not match its header of {len(header)} "
+                "columns; restore it, or start the run again in another directory"
+            )
+    return rows
+
+
+def check_summary_file(run_dir: str | Path) -> None:
+    """A run being continued may hold ``summary.json`` (it ended before); one that is not
+    valid JSON raises :class:`RunFileError` naming it."""
+    path = Path(run_dir) / SUMMARY_FILE
+    if not path.exists():
+        return
+    try:
+        data = read_json(path)
+    except (OSError, ValueError) as exc:
+        raise RunFileError(
+            f"{path} is damaged ({type(exc).__name__}: {exc}); remove it and continue the run: "
+            "it is written again when the run ends"
+        ) from None
+    if not isinstance(data, dict):
+        raise RunFileError(
+            f"{path} is damaged (not a JSON object); remove it and continue the run: it is "
+            "written again when the run ends"
+        )
 
 
 class MetricsLog:
@@ -140,14 +267,23 @@ class MetricsLog:
 
     @classmethod
     def resume(
-        cls, run_dir: str | Path, tensorboard: bool = True, filename: str = METRICS_FILE
+        cls,
+        run_dir: str | Path,
+        tensorboard: bool = True,
+        filename: str = METRICS_FILE,
+        expected_rows: int | None = None,
     ) -> MetricsLog:
-        """Re-open a run's log, keeping the rows already written."""
+        """Re-open a run's log, keeping the rows already written. A file that is not a whole
+        CSV table, or that holds fewer than ``expected_rows`` rows (those a checkpoint
+        counted), raises :class:`RunFileError` naming it."""
         path = Path(run_dir) / filename
-        rows = []
-        if path.exists():
-            with open(path, newline="", encoding="utf-8") as handle:
-                rows = list(csv.DictReader(handle))
+        rows = read_csv_rows(path) if path.exists() else []
+        if expected_rows is not None and len(rows) < expected_rows:
+            state = f"holds {len(rows)} rows" if path.exists() else "is missing"
+            raise RunFileError(
+                f"{path} {state}, but the checkpoint counts {expected_rows}: the file was cut "
+                "or edited; restore it, or start the run again in another directory"
+            )
         return cls(run_dir, tensorboard=tensorboard, rows=rows, filename=filename)
 
     def log(self, row: Mapping[str, Any], step: int | None = None) -> None:

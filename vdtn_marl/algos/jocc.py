@@ -70,9 +70,12 @@ from vdtn_marl.runs import (
     atomic_write_bytes,
     atomic_write_json,
     check_interrupt,
+    check_summary_file,
     interrupt_requested,
     logged_stage,
     progress,
+    remove_stale_temp_files,
+    run_lock,
     run_outputs,
 )
 from vdtn_marl.sim.cacc import CACCController
@@ -373,10 +376,16 @@ class JointOptimisation:
         self.load_policies(payload)
         self.position = dict(payload["position"])
         set_rng_state(payload["rng"])
-        self.train_log = MetricsLog.resume(self.run_dir)
-        self.train_log.truncate(payload["log_rows"]["train"])
-        self.eval_log = MetricsLog.resume(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
-        self.eval_log.truncate(payload["log_rows"]["eval"])
+        rows = payload["log_rows"]
+        check_summary_file(self.run_dir)
+        train_log = MetricsLog.resume(self.run_dir, expected_rows=rows["train"])
+        eval_log = MetricsLog.resume(
+            self.run_dir, tensorboard=False, filename=EVALUATION_FILE, expected_rows=rows["eval"]
+        )
+        remove_stale_temp_files(self.run_dir)  # of a writer killed mid-write
+        self.train_log, self.eval_log = train_log, eval_log
+        self.train_log.truncate(rows["train"])
+        self.eval_log.truncate(rows["eval"])
         return True
 
     # ------------------------------------------------------------------ stages
@@ -494,6 +503,10 @@ class JointOptimisation:
     # ------------------------------------------------------------------ loop
     def run(self) -> dict[str, Any]:
         """Run (or continue) every iteration and stage; write and return the summary."""
+        with run_lock(self.run_dir):  # a second process in this folder is refused
+            return self._run()
+
+    def _run(self) -> dict[str, Any]:
         cfg = self.cfg
         resumed = cfg.resume and self.resume()
         began = time.perf_counter()

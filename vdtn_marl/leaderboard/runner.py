@@ -23,6 +23,7 @@ from vdtn_marl.runs import (
     CONFIG_FILE,
     atomic_write_json,
     atomic_write_text,
+    run_lock,
 )
 
 
@@ -34,8 +35,9 @@ def run_cell(cell: Cell, data: dict, run_cfg: Any, out_dir: str | Path) -> dict:
 
     cell_dir = cell.directory(out_dir)
     cell_dir.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(cell_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
-    return api.jocc(run_cfg, cell_dir)  # also writes evaluation_raw.npz for the plots
+    with run_lock(cell_dir):  # two launchers of one shard: the second refuses the cell
+        atomic_write_text(cell_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
+        return api.jocc(run_cfg, cell_dir)  # also writes evaluation_raw.npz for the plots
 
 
 @dataclass
