@@ -24,6 +24,7 @@ MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_it
 RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
 LEARNED_RRA = ("jocc", "drra", "throughput")
 IVOI_ESTIMATORS = ("td", "rollout")
+VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
 COMPLETIONS = ("none", "hold", "kalman", "learned")
@@ -159,6 +160,10 @@ class RRAConfig:
     # rollout estimator: ξ compares the actual command with π*'s ("optimal", the paper's IVoI)
     # or with the one a lost CAM would have led to ("cam_lost", a difference reward)
     ivoi_baseline: str = "optimal"
+    # td estimator: v* is π*'s critic (none) or a copy fitted, before each RRA stage, on the
+    # states the acting system visits, to rollouts of π* (acting; vdtn_marl/algos/value_fit.py)
+    value_fit: str = "none"
+    value_fit_horizon: int = 100  # value_fit=acting: intervals of π* per target, then its critic
     throughput_scale: float = 0.004  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = 20.0  # multiplies ξ before κ2
     miss_penalty: float = 1.0  # drra: penalty of a CAM that misses its interval
@@ -255,6 +260,13 @@ def validate(cfg: RunConfig) -> RunConfig:
         )
     _choice("rra.name", r.name, RRA_METHODS)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
+    _choice("rra.value_fit", r.value_fit, VALUE_FITS)
+    _positive_int("rra.value_fit_horizon", r.value_fit_horizon, high=100_000)
+    if r.value_fit != "none" and r.ivoi_estimator != "td":
+        raise ConfigError(
+            f"rra.value_fit={r.value_fit!r} fits the v* of the td estimator; it needs "
+            f"rra.ivoi_estimator=td, not {r.ivoi_estimator!r}"
+        )
     _positive_int("rra.rollout_intervals", r.rollout_intervals, high=100_000)
     if not isinstance(r.rollout_bootstrap, bool):
         raise ConfigError(f"rra.rollout_bootstrap={r.rollout_bootstrap!r} must be true or false")

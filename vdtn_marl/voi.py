@@ -106,6 +106,27 @@ def discounted_rollout(
     return to_torch(returns), final.torch()
 
 
+def bootstrapped_return(
+    twin: DigitalTwin,
+    state: PlatoonState,
+    interval: torch.Tensor,
+    policy: Policy,
+    horizon_intervals: int,
+    discount: float,
+    terminal_value: Policy | None = None,
+) -> torch.Tensor:
+    """``Σ_{j<H} γ^j r_j + γ^H·v(S_H)`` [R, F] of ``policy`` on perfect observations from
+    ``state`` (torch tensors; rows as in :func:`discounted_rollout`), with ``terminal_value``
+    (perfect observations [R, F, 8] → [R, F]) valuing the state reached; nothing counts after
+    a collision ended a row. ``terminal_value=None``: the plain ``H``-interval return."""
+    _check_rollout(horizon_intervals, discount)
+    returns, final, alive = _rollout(twin, state, interval, policy, horizon_intervals, discount)
+    if terminal_value is None:
+        return returns
+    value = terminal_value(perfect_observation(final, twin.params.platoon))
+    return returns + discount**horizon_intervals * alive[:, None] * value
+
+
 def _rollout(
     twin: DigitalTwin,
     state: PlatoonState,

@@ -29,6 +29,7 @@ Run ``python -m vdtn_marl.algos.jocc`` for one JOCC iteration with the default s
 from __future__ import annotations
 
 import argparse
+import copy
 import logging
 import sys
 import time
@@ -51,6 +52,7 @@ from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
+from vdtn_marl.algos.value_fit import fit_value_on_acting_states
 from vdtn_marl.config import (
     IVOI_ESTIMATORS,
     RunConfig,
@@ -108,6 +110,11 @@ PER_ITERATION_METRICS = (
     "evoi",
 )
 _log = logging.getLogger(__name__)
+
+#: rra.value_fit=acting: scenarios per RRA policy whose states v* is fitted on, and the seed
+#: offset of those scenarios (apart from training's and evaluation's)
+VALUE_FIT_SCENARIOS = 32
+VALUE_FIT_SEED_OFFSET = 2_000_000_000
 
 #: Evaluation scenarios are seeded apart from every training scenario.
 EVAL_SEED_OFFSET = 1_000_000_000
@@ -213,6 +220,9 @@ class JointOptimisation:
             drop_features=drop,
             prior=cacc,
         )
+        # rra.value_fit=acting: the td estimator's v* is a copy of π*'s critic fitted on the
+        # acting system's states before each RRA stage (value_fit.py); π*'s own is unchanged
+        self.v_fit = copy.deepcopy(self.pi_star.critic) if rra.value_fit == "acting" else None
         self.estimator = self.ivoi_estimator(rra.ivoi_estimator, baseline=rra.ivoi_baseline)
         self.rra = None
         if self.rra_learned:
@@ -317,6 +327,8 @@ class JointOptimisation:
                 raise ConfigError(
                     f"baseline={baseline!r} needs the rollout estimator (td compares with π*)"
                 )
+            if self.v_fit is not None:  # rra.value_fit=acting
+                return TDIVoIEstimator(CriticValue(self.v_fit, "vehicle"), self.gamma)
             return TDIVoIEstimator(v_star, self.gamma)
         if name == "rollout":
             rra = self.cfg.rra
@@ -348,6 +360,7 @@ class JointOptimisation:
                 "rng": rng_state(),
                 "log_rows": {"train": len(self.train_log.rows), "eval": len(self.eval_log.rows)},
                 "version": __version__,
+                **({"value_fit": self.v_fit.state_dict()} if self.v_fit is not None else {}),
             },
         )
 
@@ -362,6 +375,8 @@ class JointOptimisation:
                     raise CheckpointError(
                         f"checkpoint trainer {name!r} does not fit this config ({err})"
                     ) from err
+        if self.v_fit is not None and "value_fit" in payload:
+            self.v_fit.load_state_dict(payload["value_fit"])
 
     def resume(self) -> bool:
         """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
@@ -414,6 +429,8 @@ class JointOptimisation:
         if self.position["stage_start"] is None:
             if stage == "control_perfect" and trainer.iteration == 0:
                 self._warm_start_pi_star()
+            if stage == "rra" and self.v_fit is not None:
+                self._fit_value()
             self.position["stage_start"] = trainer.iteration
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
@@ -435,6 +452,35 @@ class JointOptimisation:
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
+
+    def _fit_value(self) -> None:
+        """``rra.value_fit=acting``: fit the td estimator's v* on the states the acting system
+        visits under the current RRA policy and under the greedy one (value_fit.py)."""
+        cfg = self.cfg
+        what = f"v* on the acting system's states ({cfg.rra.value_fit_horizon}-interval targets)"
+        with logged_stage("value_fit", what, self.position["iteration"]):
+            stats = fit_value_on_acting_states(
+                self.v_fit,
+                self.pi_star.critic,
+                "vehicle",
+                self.params,
+                self.control_policy(),
+                [self.rra_policy(), make_rra_baseline("greedy", self.params, cfg.seed)],
+                ActorPolicy(self.pi_star.actor, "vehicle"),
+                CriticValue(self.pi_star.critic, "vehicle"),
+                episodes=VALUE_FIT_SCENARIOS,
+                intervals=self.params.episode_intervals,
+                seed=VALUE_FIT_SEED_OFFSET + cfg.seed * 100 + self.position["iteration"],
+                horizon=cfg.rra.value_fit_horizon,
+                discount=self.gamma,
+                trace_source=self.train_traces,
+                device=self.device,
+                completion=self.completion,
+            )
+        _log.info("value fit: %s", stats.as_dict())
+        self.position.setdefault("value_fit", []).append(
+            {"jocc_iteration": self.position["iteration"], **stats.as_dict()}
+        )
 
     def _warm_start_pi_star(self) -> None:
         """``control.warm_start=causal_mpc``: π* imitates the causal MPC before its first PPO
@@ -633,6 +679,8 @@ class JointOptimisation:
             # with algo.validate_every: the trainer iteration whose weights each stage kept
             "selected_iterations": dict(self.position.get("selected_iterations", {})),
             "warm_start": self.position.get("warm_start"),
+            # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
+            "value_fit": self.position.get("value_fit"),
             "seconds": seconds,
             "resumed": resumed,
             **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
