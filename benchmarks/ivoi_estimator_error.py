@@ -40,8 +40,10 @@ from rich.table import Table
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
+from vdtn_marl.algos.ppo import CriticValue
 from vdtn_marl.benchmarking import checkpoint_run, loaded_checkpoints, parse_names, provenance
 from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.voi import TDIVoIEstimator
 
 RESULTS = Path("benchmarks/results/ivoi_estimator_error.json")
 LEARNED = "learned"
@@ -120,13 +122,26 @@ def summarise(rows: torch.Tensor) -> dict:
     return out
 
 
-def measure(loop: JointOptimisation, rra: str, reference: str, episodes: int) -> dict:
+#: --td-value: whose v* the td estimator reads: the run's (its fitted copy with
+#: rra.value_fit=acting, else π*'s critic) or π*'s critic itself
+TD_VALUES = ("run", "pi_star")
+
+
+def td_estimator(loop: JointOptimisation, td_value: str):
+    if td_value == "pi_star":
+        return TDIVoIEstimator(CriticValue(loop.pi_star.critic, "vehicle"), loop.gamma)
+    return _ivoi_signal().make_estimator(loop, "td")
+
+
+def measure(
+    loop: JointOptimisation, rra: str, reference: str, episodes: int, td_value: str = "run"
+) -> dict:
     signal = _ivoi_signal()
     cfg = loop.cfg
     rra_policy = (
         loop.rra_policy() if rra == LEARNED else make_rra_baseline(rra, loop.params, cfg.seed)
     )
-    paired = PairedIVoI(signal.make_estimator(loop, "td"), signal.make_estimator(loop, reference))
+    paired = PairedIVoI(td_estimator(loop, td_value), signal.make_estimator(loop, reference))
     began = time.perf_counter()
     acting = evaluate_system(
         loop.params, loop.control_policy(), rra_policy, perfect=False,
@@ -134,8 +149,10 @@ def measure(loop: JointOptimisation, rra: str, reference: str, episodes: int) ->
         seed=EVAL_SEED_OFFSET + cfg.seed, gamma=loop.gamma, device=loop.device,
         trace_source=loop.eval_traces, ivoi_estimator=paired, completion=loop.completion,
     )  # fmt: skip
+    fitted = td_value == "run" and loop.v_fit is not None
     return {
         "rra": f"{cfg.rra.name} ({LEARNED})" if rra == LEARNED else rra,
+        "td_value": "fitted on the acting system's states" if fitted else "π*'s critic",
         "cam_delivery_rate": acting.metrics["cam_delivery_rate"],
         "collision_rate": acting.metrics["collision_rate"],
         **summarise(torch.cat(paired.rows)),
@@ -149,8 +166,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rra", default="learned,random", help="RRA policies (learned: the run's)")
     parser.add_argument("--reference", default="rollout:100:mc", help="reference estimator spec")
     parser.add_argument("--episodes", type=int, default=8, help="held-out scenarios per run")
+    parser.add_argument(
+        "--td-value", default="run",
+        help="whose v* td reads, comma-separated: run (the run's: fitted with "
+        "rra.value_fit=acting), pi_star (π*'s critic)",
+    )  # fmt: skip
     parser.add_argument("--output", type=Path, default=RESULTS)
     args = parser.parse_args(argv)
+    td_values = parse_names("--td-value", args.td_value, TD_VALUES)
     if args.episodes < 1:
         raise SystemExit(f"--episodes {args.episodes!r} must be >= 1")
     signal = _ivoi_signal()
@@ -161,16 +184,21 @@ def main(argv: list[str] | None = None) -> int:
     began = time.perf_counter()
     runs = []
     for path, loop in loaded_checkpoints(args.checkpoints, "ivoi_estimator_error_"):
-        rows = [measure(loop, rra, reference, args.episodes) for rra in rras]
+        rows = [
+            measure(loop, rra, reference, args.episodes, td_value)
+            for td_value in td_values
+            for rra in rras
+        ]
         runs.append({**checkpoint_run(path, loop.cfg), "rows": rows})
     table = Table(title=f"td IVoI against {reference} on the acting system's states")
-    for column in ("run", "RRA", "n", "ref std", "bias", "RMSE", "corr", "explained"):
+    for column in ("run", "RRA", "v*", "n", "ref std", "bias", "RMSE", "corr", "explained"):
         table.add_column(column, justify="right")
     for run in runs:
         for row in run["rows"]:
             s = row["all"]
             table.add_row(
-                Path(run["checkpoint"]).parent.parent.name, row["rra"], str(s.get("n", 0)),
+                Path(run["checkpoint"]).parent.parent.name, row["rra"], row["td_value"],
+                str(s.get("n", 0)),
                 *(f"{s.get(k, float('nan')):.4f}" for k in
                   ("reference_std", "bias", "rmse", "correlation", "explained")),
             )  # fmt: skip

@@ -35,6 +35,13 @@ def test_measures_td_against_the_reference_on_the_same_intervals(checkpoint, tmp
         assert counted == 2 * 20 * 3  # scenarios × intervals × followers
         assert row["delivered"].get("n", 0) + row["lost"].get("n", 0) == row["all"]["n"]
         assert row["all"]["rmse"] >= abs(row["all"]["bias"])
+    # a run without rra.value_fit: its td reads π*'s critic, the same as --td-value pi_star
+    both = tmp_path / "both.json"
+    argv = [*args, "--reference", "rollout:3:mc", "--td-value", "run,pi_star"]
+    assert module.main([*argv, "--output", str(both)]) == 0
+    rows = json.loads(both.read_text())["runs"][0]["rows"]
+    assert [row["td_value"] for row in rows] == ["π*'s critic"] * 4
+    assert rows[0]["all"] == rows[2]["all"] and rows[1]["all"] == rows[3]["all"]
 
 
 def test_a_reference_the_signal_script_refuses_is_refused(checkpoint):  # noqa: F811
