@@ -369,7 +369,11 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 
 def test_shipped_benchmarks_plan_their_grid():
-    for name, cells in (("smoke", 12), ("reduced", 185), ("leaderboard", 165), ("sensitivity", 25)):
+    shipped = (
+        ("smoke", 12), ("reduced", 185), ("leaderboard", 165), ("sensitivity", 25),
+        ("headline", 20), ("value_fit", 15),
+    )  # fmt: skip
+    for name, cells in shipped:
         data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
         cfg = config.validate_benchmark(
             config.BenchConfig(benchmark=config.BenchmarkConfig(**data))
@@ -414,6 +418,27 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
     assert sens["budgets"] == {
         m: data["budgets"][m] for m in sens["methods"] if m in data["budgets"]
     }
+
+
+def test_the_headline_and_value_fit_cells_are_reduced_cells():
+    """`headline` and `value_fit` reuse `reduced` 3.0's runs: each of their cells of a method
+    that `reduced` has is one of its cells, override for override (so it can be copied)."""
+
+    def cells(name):
+        data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
+        cfg = config.validate_benchmark(
+            config.BenchConfig(benchmark=config.BenchmarkConfig(**data))
+        )
+        return {cell.name: cell.overrides for cell in leaderboard.plan(cfg)}
+
+    reduced, headline, value_fit = cells("reduced"), cells("headline"), cells("value_fit")
+    assert headline and all(reduced[name] == o for name, o in headline.items())
+    shared = {name: o for name, o in value_fit.items() if "vfit" not in name}
+    assert len(shared) == 10 and all(headline[name] == o for name, o in shared.items())
+    fitted = {name: o for name, o in value_fit.items() if "vfit" in name}
+    for name, overrides in fitted.items():
+        plain = value_fit[name.replace("jocc_k050_vfit", "jocc_k050")]
+        assert set(overrides) - set(plain) == {"rra.value_fit=acting"}, name
 
 
 def test_extra_seeds_run_after_the_main_cells_seed_by_seed():
