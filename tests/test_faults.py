@@ -219,20 +219,25 @@ def test_a_damaged_file_in_a_run_being_continued_is_named(
     assert after == {p: b for p, b in before.items() if p.name != LOCK_FILE}  # nothing written
 
 
-def test_a_damaged_file_on_resume_is_one_line_from_the_cli(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("name", ["metrics.csv", "checkpoints/last.pt"])
+def test_a_damaged_file_on_resume_is_one_line_from_the_cli(name, tmp_path, monkeypatch, capsys):
     from vdtn_marl import cli
 
     monkeypatch.chdir(tmp_path)
     run = tmp_path / "run"
     assert cli.main([*RUN, f"hydra.run.dir={run}"]) == 0
-    (run / "metrics.csv").write_text("not,a\n1,2,3,4\n")
+    path = run / name
+    if name.endswith(".csv"):
+        path.write_text("not,a\n1,2,3,4\n")
+    else:
+        path.write_bytes(path.read_bytes()[:200])  # a checkpoint cut short
     capsys.readouterr()
     with pytest.raises(SystemExit) as info:
         cli.main([*RUN, f"hydra.run.dir={run}", "resume=true"])
     assert info.value.code == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert lines == [line for line in lines if line.startswith("error: ")] and len(lines) == 1
-    assert str(run / "metrics.csv") in lines[0] and "Traceback" not in lines[0]
+    assert str(path) in lines[0] and "Traceback" not in lines[0]
 
 
 # --- two launchers in one run directory --------------------------------------------------------
