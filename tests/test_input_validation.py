@@ -298,7 +298,7 @@ def _write_braking_trace(path):
 
 
 def test_hard_braking_in_a_trace_file_is_reported_and_can_be_kept(tmp_path):
-    from vdtn_marl.algos.jocc import trace_preprocessing_note
+    from vdtn_marl.data.selection import preprocessing_note
 
     path = _write_braking_trace(tmp_path / "brake.csv")
     cfg = validate(_cfg(traces="csv", trace_path=str(path), eval_windows="random"))
@@ -309,7 +309,7 @@ def test_hard_braking_in_a_trace_file_is_reported_and_can_be_kept(tmp_path):
     assert report["accel_min_before_mps2"] == pytest.approx(-5.0, abs=0.01)
     assert report["accel_min_after_mps2"] == pytest.approx(-2.6, abs=1e-6)
     assert min(np.diff(p.speed_mps).min() / 0.1 for p in train.profiles) >= -2.6 - 1e-9
-    note = trace_preprocessing_note(train, cfg)
+    note = preprocessing_note(train, cfg.scenario.trace_path)
     assert note.startswith(f"scenario.trace_path={str(path)!r}") and "\n" not in note
     assert "5.00 m/s² became 2.60 m/s²" in note and "scenario.trace_accel_clip=none" in note
     # the leader's recorded deceleration, kept on request
@@ -319,11 +319,11 @@ def test_hard_braking_in_a_trace_file_is_reported_and_can_be_kept(tmp_path):
     assert train.preprocessing["accel_points_clipped"] == 0
     assert train.preprocessing["clip_accel_mps2"] is None
     assert min(np.diff(p.speed_mps).min() / 0.1 for p in train.profiles) < -4.5
-    assert trace_preprocessing_note(train, kept) is None
+    assert preprocessing_note(train, kept.scenario.trace_path) is None
     # a file that needs no clipping says nothing
     smooth = validate(_cfg(traces="csv", trace_path=str(_write_trace(tmp_path / "ok.csv", 120.0)),
                            eval_windows="random"))  # fmt: skip
-    assert trace_preprocessing_note(trace_sources(smooth)[0], smooth) is None
+    assert preprocessing_note(trace_sources(smooth)[0], smooth.scenario.trace_path) is None
 
 
 @pytest.mark.parametrize(

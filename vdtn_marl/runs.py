@@ -88,8 +88,6 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> Path:
     except OSError as exc:
         if tmp is not None:
             Path(tmp).unlink(missing_ok=True)
-        if isinstance(exc, RunWriteError):
-            raise
         kept = "its previous version is intact" if path.exists() else "nothing was written"
         raise RunWriteError(
             exc.errno, f"cannot write {path}: {exc.strerror or exc}; {kept}"

@@ -10,7 +10,7 @@ from test_training import TINY_ALGO, TINY_EXPERIMENT, tiny_config  # the tiny ru
 
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.algos.ppo import CriticValue, PPOTrainer
-from vdtn_marl.algos.value_fit import _values, fit_critic
+from vdtn_marl.algos.value_fit import fit_critic
 from vdtn_marl.config import ConfigError, RRAConfig, validate
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.sim.params import TwinParams
@@ -41,7 +41,7 @@ def test_fit_critic_learns_a_target_it_could_not_predict():
     )
     assert after < 0.2 * before and held_after < 0.2 * held_before, (before, after)
     with torch.no_grad():
-        fitted = _values(critic, "vehicle", observations[:10])
+        fitted = CriticValue(critic, "vehicle")(observations[:10])
     assert torch.allclose(fitted, targets[:10], atol=1.0)
 
 

@@ -61,6 +61,7 @@ from vdtn_marl.config import (
     validate,
     validate_device,
 )
+from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.runs import (
@@ -151,24 +152,6 @@ def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]
     return file_sources(scenario.traces, scenario.trace_path, scenario.eval_windows, band)
 
 
-def trace_preprocessing_note(source: object, cfg: RunConfig) -> str | None:
-    """One line when pre-processing clipped a trace file's acceleration (what changed, and the
-    setting that keeps the recorded one), else None."""
-    report = getattr(source, "preprocessing", None)
-    if not report or not report.get("accel_points_clipped"):
-        return None
-    lo, hi = report["clip_accel_mps2"]
-    return (
-        f"scenario.trace_path={cfg.scenario.trace_path!r}: pre-processing clipped the "
-        f"acceleration of {report['accel_points_clipped']} of {report['output_points']} samples "
-        f"to [{lo:g}, {hi:g}] m/s² (the followers' actuator limits): the largest deceleration "
-        f"{-report['accel_min_before_mps2']:.2f} m/s² became "
-        f"{-report['accel_min_after_mps2']:.2f} m/s², the largest acceleration "
-        f"{report['accel_max_before_mps2']:.2f} became {report['accel_max_after_mps2']:.2f}; "
-        "scenario.trace_accel_clip=none keeps the recorded ones"
-    )
-
-
 class JointOptimisation:
     """The JOCC loop (see the module doc). ``task`` picks the stages (:data:`TASK_STAGES`)."""
 
@@ -191,7 +174,7 @@ class JointOptimisation:
         self.rra_learned = rra.learned
         self.gamma = algo.gamma
         self.train_traces, self.eval_traces = trace_sources(cfg)
-        note = trace_preprocessing_note(self.train_traces, cfg)
+        note = preprocessing_note(self.train_traces, cfg.scenario.trace_path)
         if note:
             _log.warning(note)
         env_kw: dict[str, Any] = dict(
@@ -467,7 +450,6 @@ class JointOptimisation:
                 self.control_policy(),
                 [self.rra_policy(), make_rra_baseline("greedy", self.params, cfg.seed)],
                 ActorPolicy(self.pi_star.actor, "vehicle"),
-                CriticValue(self.pi_star.critic, "vehicle"),
                 episodes=VALUE_FIT_SCENARIOS,
                 intervals=self.params.episode_intervals,
                 seed=VALUE_FIT_SEED_OFFSET + cfg.seed * 100 + self.position["iteration"],

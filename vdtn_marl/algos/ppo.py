@@ -460,6 +460,10 @@ class CriticValue:
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        return self.with_grad(observation)
+
+    def with_grad(self, observation: torch.Tensor) -> torch.Tensor:
+        """The values, differentiable in the critic's weights (for fitting it)."""
         td = TensorDict(
             {(self.group, "observation"): observation.float()},
             batch_size=observation.shape[:-2],

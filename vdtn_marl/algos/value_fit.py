@@ -30,9 +30,9 @@ from dataclasses import asdict, dataclass
 from typing import Any
 
 import torch
-from tensordict import TensorDict
 
 from vdtn_marl.algos.evaluate import evaluate_system
+from vdtn_marl.algos.ppo import CriticValue
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import perfect_observation
 from vdtn_marl.voi import bootstrapped_return
@@ -119,15 +119,6 @@ def acting_value_samples(
     return torch.cat(observations), torch.cat(targets), torch.cat(scenarios)
 
 
-def _values(critic, group: str, observations: torch.Tensor) -> torch.Tensor:
-    td = TensorDict(
-        {(group, "observation"): observations},
-        batch_size=observations.shape[:-2],
-        device=observations.device,
-    )
-    return critic(td).get((group, "state_value")).squeeze(-1)
-
-
 def fit_critic(
     critic,
     group: str,
@@ -143,6 +134,7 @@ def fit_critic(
     """Fit ``critic`` (a TensorDict module: ``(group, "observation")`` → ``(group,
     "state_value")``) to ``targets`` by MSE, in place, on 80 % of the scenarios; returns the
     MSE before and after on those and on the held-out 20 %."""
+    value = CriticValue(critic, group).with_grad
     generator = torch.Generator().manual_seed(seed)
     ids = torch.unique(scenarios)
     held = ids[torch.randperm(len(ids), generator=generator)[: max(1, len(ids) // 5)]]
@@ -151,7 +143,7 @@ def fit_critic(
 
     def mse(mask: torch.Tensor) -> float:
         with torch.no_grad():
-            return float(((_values(critic, group, observations[mask]) - targets[mask]) ** 2).mean())
+            return float(((value(observations[mask]) - targets[mask]) ** 2).mean())
 
     before, held_before = mse(train), mse(test)
     x, y = observations[train], targets[train]
@@ -160,7 +152,7 @@ def fit_critic(
         order = torch.randperm(len(x), generator=generator)
         for start in range(0, len(x), minibatch):
             batch = order[start : start + minibatch]
-            loss = ((_values(critic, group, x[batch]) - y[batch]) ** 2).mean()
+            loss = ((value(x[batch]) - y[batch]) ** 2).mean()
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
@@ -175,27 +167,21 @@ def fit_value_on_acting_states(
     control,
     rra_policies: list,
     reference_policy,
-    critic_value,
     *,
-    episodes: int,
-    intervals: int,
-    seed: int,
-    horizon: int,
-    discount: float,
-    trace_source,
-    device: str | torch.device = "cpu",
-    completion=None,
     epochs: int = 30,
+    **sampling: Any,
 ) -> ValueFitStats:
     """The whole procedure of the module doc: ``target_critic`` takes ``reference_critic``'s
-    weights, then is fitted on the acting system's states; returns what was measured."""
+    weights, then is fitted on the acting system's states (``sampling``: the keywords of
+    :func:`acting_value_samples`; ``reference_critic`` values the targets' tails); returns
+    what was measured."""
     began = time.perf_counter()
     target_critic.load_state_dict(copy.deepcopy(reference_critic.state_dict()))
     observations, targets, scenarios = acting_value_samples(
-        params, control, rra_policies, reference_policy, critic_value,
-        episodes=episodes, intervals=intervals, seed=seed, horizon=horizon,
-        discount=discount, trace_source=trace_source, device=device, completion=completion,
+        params, control, rra_policies, reference_policy, CriticValue(reference_critic, group),
+        **sampling,
     )  # fmt: skip
+    seed = sampling["seed"]
     before, after, held_before, held_after = fit_critic(
         target_critic, group, observations, targets, scenarios, epochs=epochs, seed=seed
     )

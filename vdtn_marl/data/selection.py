@@ -182,8 +182,7 @@ def check_trace_lengths(
     for part, source in zip(("train", "eval"), parts, strict=True):
         if not isinstance(source, ProfileTraceSource) or source.too_short == "reflect":
             continue
-        durations = source._durations
-        longest = float(durations.max())
+        longest = max(p.duration_s for p in source.profiles)
         if longest >= span - 1e-9:
             continue
         if TIME_SPLIT_HOW in source.info.description:
@@ -215,6 +214,24 @@ def accel_band(
             f"{', '.join(TRACE_ACCEL_CLIPS)}"
         )
     return None if trace_accel_clip == "none" else (accel_min_mps2, accel_max_mps2)
+
+
+def preprocessing_note(source: object, trace_path: str | None) -> str | None:
+    """One line when pre-processing clipped the acceleration of the trace file ``source`` was
+    read from (what changed, and the setting that keeps the recorded one), else None."""
+    report = getattr(source, "preprocessing", None)
+    if not report or not report.get("accel_points_clipped"):
+        return None
+    lo, hi = report["clip_accel_mps2"]
+    return (
+        f"scenario.trace_path={trace_path!r}: pre-processing clipped the "
+        f"acceleration of {report['accel_points_clipped']} of {report['output_points']} samples "
+        f"to [{lo:g}, {hi:g}] m/s² (the followers' actuator limits): the largest deceleration "
+        f"{-report['accel_min_before_mps2']:.2f} m/s² became "
+        f"{-report['accel_min_after_mps2']:.2f} m/s², the largest acceleration "
+        f"{report['accel_max_before_mps2']:.2f} became {report['accel_max_after_mps2']:.2f}; "
+        "scenario.trace_accel_clip=none keeps the recorded ones"
+    )
 
 
 def file_sources(
