@@ -121,3 +121,19 @@ def test_outside_the_handler_ctrl_c_is_an_ordinary_keyboard_interrupt():
             check_interrupt()
         assert not interrupt_requested()
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_nested_blocks_keep_a_ctrl_c_of_the_outer_one():
+    """The CLI's block covers the config checks, the job's block the run: a Ctrl-C pressed
+    before the job starts is still seen (and acted on) inside it."""
+    from vdtn_marl.runs import check_interrupt, graceful_interrupts, interrupt_requested
+
+    before = signal.getsignal(signal.SIGINT)
+    with graceful_interrupts(lambda: "outer"):
+        signal.raise_signal(signal.SIGINT)
+        with graceful_interrupts(lambda: "inner"):
+            assert interrupt_requested()
+            with pytest.raises(KeyboardInterrupt):
+                check_interrupt()
+        assert signal.getsignal(signal.SIGINT) is not before  # still the outer block's
+    assert signal.getsignal(signal.SIGINT) is before and not interrupt_requested()

@@ -467,6 +467,19 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
     passthrough = (
         hargs.hydra_help or hargs.info or hargs.shell_completion or hargs.experimental_rerun
     )
+    from vdtn_marl.runs import graceful_interrupts
+
+    before = "interrupted before the run started; nothing was written"
+    # From here Ctrl-C only sets a flag, read at safe points (vdtn_marl.runs): never inside
+    # the imports and config checks below, where Python could swallow it or turn it into
+    # another error.
+    with graceful_interrupts(lambda: before):
+        return _cmd_hydra_run(command, argv, hargs, searchpath, passthrough, before)
+
+
+def _cmd_hydra_run(command, argv, hargs, searchpath, passthrough, before: str) -> int:
+    from vdtn_marl.runs import check_interrupt
+
     try:
         user = list(hargs.overrides)
         if command == "eval" and not passthrough:
@@ -474,11 +487,12 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
         overrides = [*user, f"hydra.job.name={command}"]
         if not passthrough:
             prevalidate(command, hargs, [*overrides, *searchpath])
+        check_interrupt()
     except CLIError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_CONFIG_ERROR
     except KeyboardInterrupt:
-        print("interrupted before the run started; nothing was written", file=sys.stderr)
+        print(before, file=sys.stderr)
         return EXIT_INTERRUPTED
     try:
         # Flags first, then the overrides: the order Hydra's own parser accepts.
