@@ -460,6 +460,24 @@ def test_extra_seeds_run_after_the_main_cells_seed_by_seed():
     assert "extra_seeds" in leaderboard.grid.RUN_FIELDS
 
 
+def test_cells_select_by_glob_and_each_pattern_must_match():
+    cfg = _bench(methods={"a": ["rra=random"], "b": []}, extra_seeds={"platoon4": {"b": [7]}})
+    names = [c.name for c in leaderboard.plan(cfg)]
+    assert config.selected_cells([], names) == names
+    assert config.selected_cells(["*/b/*"], names) == [
+        "platoon4/b/seed0", "platoon4/b/seed1", "platoon4/b/seed7"
+    ]  # fmt: skip
+    assert config.selected_cells(["platoon4/a/seed1", "*seed7"], names) == [
+        "platoon4/a/seed1", "platoon4/b/seed7"
+    ]  # fmt: skip
+    cfg.cells = ["platoon4/a/*", "platoon4/c/*"]
+    with pytest.raises(ConfigError, match=re.escape("cells: 'platoon4/c/*' matches no cell")):
+        config.validate_benchmark(cfg)
+    cfg.cells = "platoon4/a/*"
+    with pytest.raises(ConfigError, match="cells="):
+        config.validate_benchmark(cfg)
+
+
 def test_bench_rejects_bad_extra_seeds_in_one_line(tmp_path, capsys):
     code = cli.main(
         ["bench", "benchmark=smoke", f"out_dir={tmp_path / 'o'}",
@@ -664,8 +682,18 @@ def test_smoke_resume_skips_finished_cells(smoke):
     redo = smoke["out"] / "platoon4" / "greedy" / "seed1" / "summary.json"
     redo.unlink()
     cfg.progress = False
+    # `cells` selects: a missing cell outside the patterns stays missing
+    cfg.cells = ["platoon4/drra/*", "platoon4/cacc/seed0"]
+    result = leaderboard.run_benchmark(cfg, command="test")
+    assert not result.ran and len(result.done) == 3
+    assert [c.name for c in result.pending] == ["platoon4/greedy/seed1"]
+    cfg.cells = ["*/greedy/seed?"]
     result = leaderboard.run_benchmark(cfg, command="test")
     assert [c.name for c in result.ran] == ["platoon4/greedy/seed1"]
+    assert len(result.done) == 2 and not result.failed and not result.pending
+    cfg.cells = []
+    result = leaderboard.run_benchmark(cfg, command="test")
+    assert not result.ran
     assert len(result.done) == 12 and not result.failed and not result.pending
     for path, mtime in before.items():
         if path != redo:

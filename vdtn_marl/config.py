@@ -11,6 +11,7 @@ and with which reward), ``experiment`` (budgets).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
@@ -501,7 +502,9 @@ class BenchConfig:
     with a complete ``summary.json`` is skipped, so rerunning the command resumes the grid.
     ``report_dir`` receives LEADERBOARD.md, the JSON and CSV exports and the plots (default:
     ``out_dir``). ``shard``/``num_shards`` split the grid between the jobs of a Hydra sweep
-    (``-m bench shard=0,1 num_shards=2 hydra/launcher=joblib``).
+    (``-m bench shard=0,1 num_shards=2 hydra/launcher=joblib``). ``cells`` (glob patterns over
+    ``<scenario>/<method>/seed<k>``, e.g. ``[platoon4/greedy/*]``; empty: all) runs only the
+    matching cells, shards splitting those; the report still covers every complete cell.
     """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
@@ -509,6 +512,7 @@ class BenchConfig:
     report_dir: str | None = None
     shard: int = 0
     num_shards: int = 1
+    cells: list[str] = field(default_factory=list)
     report: bool = True  # write the report once every cell is complete
     device: str = "cpu"
     progress: bool = True
@@ -580,7 +584,42 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
     _positive_int("shard", cfg.shard, low=0, high=cfg.num_shards - 1)
     if not cfg.out_dir:
         raise ConfigError("out_dir='' must name the directory of the benchmark's runs")
+    _validate_cell_patterns(cfg)
     return cfg
+
+
+def selected_cells(patterns: Sequence[str], names: Sequence[str]) -> list[str]:
+    """The cell names (``<scenario>/<method>/seed<k>``) matched by any glob pattern of
+    ``cells`` (all of them when there is none)."""
+    from fnmatch import fnmatchcase
+
+    if not patterns:
+        return list(names)
+    return [n for n in names if any(fnmatchcase(n, p) for p in patterns)]
+
+
+def _validate_cell_patterns(cfg: BenchConfig) -> None:
+    """``cells``: a list of glob patterns, each matching at least one cell of the grid."""
+    b = cfg.benchmark
+    patterns = cfg.cells if cfg.cells is not None else []
+    if isinstance(patterns, str) or not isinstance(patterns, Sequence):
+        raise ConfigError(
+            f"cells={patterns!r} must be a list of patterns over <scenario>/<method>/seed<k>, "
+            "e.g. [platoon4/greedy/*]"
+        )
+    names = [
+        f"{scenario}/{method}/seed{seed}"
+        for scenario in b.scenarios
+        for method in b.methods
+        for seed in benchmark_seeds(b, scenario, method)
+    ]
+    for pattern in patterns:
+        if not isinstance(pattern, str) or not selected_cells([pattern], names):
+            raise ConfigError(
+                f"cells: {pattern!r} matches no cell of benchmark {b.name!r}; patterns are "
+                f"globs over <scenario>/<method>/seed<k>, e.g. {names[0]!r} or "
+                f"'{b.scenarios[0]}/*'"
+            )
 
 
 def benchmark_seeds(b: BenchmarkConfig, scenario: str, method: str) -> list[int]:

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.config import BenchConfig
+from vdtn_marl.config import BenchConfig, selected_cells
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
     Cell,
@@ -58,7 +58,8 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
     from vdtn_marl.runs import progress
 
     cells = plan(cfg)
-    mine = cells[cfg.shard :: cfg.num_shards]
+    wanted = set(selected_cells(cfg.cells, [c.name for c in cells]))
+    mine = [c for c in cells if c.name in wanted][cfg.shard :: cfg.num_shards]
     out_dir = Path(cfg.out_dir)
     check_out_dir(cfg)
     atomic_write_json(out_dir / MANIFEST_FILE, manifest(cfg))
