@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import sys
 
-from vdtn_marl.leaderboard import main
+from vdtn_marl.cli import bench_main
 
 if __name__ == "__main__":
-    raise SystemExit(main(sys.argv[1:]))
+    raise SystemExit(bench_main(sys.argv[1:]))

@@ -18,6 +18,7 @@ import pytest
 
 from vdtn_marl import cli, cli_help, config, leaderboard
 from vdtn_marl.config import ConfigError
+from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.runs import RAW_EVALUATION_FILE
 
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
@@ -495,7 +496,7 @@ def test_bench_rejects_bad_extra_seeds_in_one_line(tmp_path, capsys):
 def test_methods_must_share_the_evaluation_scenarios():
     cfg = _bench(budgets={"b": ["experiment.eval_episodes=3"]})
     cells = leaderboard.plan(cfg)
-    with leaderboard.grid.hydra_compose():
+    with hydra_compose():
         composed = {c: leaderboard.compose_cell(c, "cpu")[0] for c in cells}
     with pytest.raises(leaderboard.LeaderboardError, match="experiment.eval_episodes"):
         leaderboard.check_eval_pairing(composed)

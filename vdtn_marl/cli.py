@@ -531,3 +531,9 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 if __name__ == "__main__":
     raise SystemExit(main())
+
+
+def bench_main(argv: Sequence[str] | None = None) -> int:
+    """``vdtn-marl bench ARGS`` (for ``python -m vdtn_marl.leaderboard`` and
+    ``benchmarks/leaderboard.py``)."""
+    return main(["bench", *(sys.argv[1:] if argv is None else argv)])

@@ -6,8 +6,9 @@ from __future__ import annotations
 from importlib import resources
 from typing import Any
 
+from vdtn_marl.experiment.compose import CONFIG_PACKAGE
+
 PROG = "vdtn-marl"
-CONFIG_PACKAGE = "vdtn_marl.conf"
 
 COMMANDS = {
     "jocc": "joint optimisation of control and communication (JOCC): the main experiment",

@@ -17,11 +17,14 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.cli_errors import CLIError, translate
-from vdtn_marl.cli_help import (
+from vdtn_marl.cli_help import EVAL_FRESH_KEYS, group_options, read_conf_yaml
+from vdtn_marl.experiment.compose import (
     CONFIG_PACKAGE,
-    EVAL_FRESH_KEYS,
-    group_options,
-    read_conf_yaml,
+    checkpoint_file,
+    checkpoint_problem,
+    compose_config,
+    job_config,
+    to_run_config,
 )
 
 # Commands whose config is composed by Hydra, and the primary config of each.
@@ -92,97 +95,6 @@ def _check_launcher(hydra_cfg: Any) -> None:
             f"hydra/launcher={choice} needs the plugin {package}, which is not installed; "
             f"{hint}; allowed here: {', '.join(usable_launchers())}"
         )
-
-
-def compose_config(config_name: str, overrides: list[str]) -> Any:
-    from hydra import compose
-
-    return compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
-
-
-def job_config(cfg: Any) -> dict:
-    """The composed config as plain data, without the ``hydra`` node."""
-    from omegaconf import OmegaConf, open_dict
-
-    if "hydra" in cfg:
-        cfg = cfg.copy()
-        with open_dict(cfg):
-            del cfg["hydra"]
-    return OmegaConf.to_container(cfg, resolve=True, throw_on_missing=True)
-
-
-def to_run_config(data: dict, command: str = "jocc") -> Any:
-    """Composed job config (plain data) -> validated :class:`RunConfig`: ranges, the device,
-    and the checkpoint (required by ``eval``; a run directory stands for its last checkpoint,
-    and ``data["checkpoint"]`` is updated to the file)."""
-    from vdtn_marl import config
-
-    data["checkpoint"] = _checkpoint_file(data.get("checkpoint"), required=command == "eval")
-    run_cfg = config.validate(config.from_dict(data))
-    config.validate_device(run_cfg.device)
-    if run_cfg.checkpoint is not None:
-        _check_checkpoint(run_cfg, command)
-    return run_cfg
-
-
-def _check_checkpoint(run_cfg: Any, command: str) -> None:
-    """The checkpoint fits the config's networks; for ``eval``, it holds a trained policy."""
-    from vdtn_marl.algos.checkpoint import (
-        CheckpointError,
-        ShapeMismatch,
-        load_checkpoint,
-        untrained_policies,
-    )
-    from vdtn_marl.config import ConfigError, to_dict
-
-    name = f"checkpoint={run_cfg.checkpoint}"
-    try:
-        payload = load_checkpoint(run_cfg.checkpoint, to_dict(run_cfg))
-    except ShapeMismatch as exc:
-        raise ConfigError(
-            f"{exc.key}={exc.given!r} does not fit {name}, whose networks were built with "
-            f"{exc.key}={exc.saved!r}; allowed: {exc.key}={exc.saved!r}, the value of the "
-            "checkpoint's run"
-        ) from exc
-    except CheckpointError as exc:
-        raise ConfigError(_checkpoint_problem(run_cfg.checkpoint, exc)) from exc
-    if command == "eval":
-        warnings, nothing_trained = untrained_policies(payload, to_dict(run_cfg))
-        if nothing_trained:
-            raise ConfigError(
-                f"{name} holds no trained policy to evaluate ({'; '.join(warnings)}); allowed: "
-                "a checkpoint whose run trained the policies that act"
-            )
-
-
-def _checkpoint_problem(value: Any, exc: Exception) -> str:
-    """A :class:`CheckpointError` as ``checkpoint=VALUE <problem>; allowed: ...``."""
-    problem = str(exc)
-    prefix = f"checkpoint {str(value)!r} "
-    problem = problem[len(prefix) :] if problem.startswith(prefix) else f"cannot be used: {problem}"
-    return f"checkpoint={value} {problem}; allowed: a checkpoint written by vdtn-marl"
-
-
-def _checkpoint_file(value: Any, required: bool) -> Any:
-    from vdtn_marl.config import ConfigError
-    from vdtn_marl.runs import CHECKPOINT_DIR
-
-    allowed = f"allowed: a run directory (with {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
-    if value is None:
-        if required:
-            raise ConfigError(f"checkpoint=None: eval needs the policies to evaluate; {allowed}")
-        return None
-    path = Path(str(value))
-    if path.is_dir():
-        if (path / CHECKPOINT_DIR / "last.pt").is_file():
-            return str(path / CHECKPOINT_DIR / "last.pt")
-        raise ConfigError(
-            f"checkpoint={value} is a folder without {CHECKPOINT_DIR}/last.pt (no run saved a "
-            f"checkpoint there); {allowed}"
-        )
-    if not path.is_file():
-        raise ConfigError(f"checkpoint={value} does not exist; {allowed}")
-    return str(path)
 
 
 def _validate_bench(data: dict, check_runs: bool = True) -> None:
@@ -307,7 +219,8 @@ def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    from vdtn_marl.config import ConfigError, register_configs
+    from vdtn_marl.config import register_configs
+    from vdtn_marl.errors import ConfigError
 
     register_configs()
     with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
@@ -336,13 +249,13 @@ def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]
 def _run_config_of(checkpoint: Any) -> dict | None:
     """The config (nested dict) stored in ``checkpoint`` (a run directory or a file)."""
     from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
-    from vdtn_marl.config import ConfigError
+    from vdtn_marl.errors import ConfigError
 
-    path = _checkpoint_file(checkpoint, required=True)
+    path = checkpoint_file(checkpoint, required=True)
     try:
         config = load_checkpoint(path).get("config")
     except CheckpointError as exc:
-        raise ConfigError(_checkpoint_problem(path, exc)) from exc
+        raise ConfigError(checkpoint_problem(path, exc)) from exc
     return config if isinstance(config, dict) else None
 
 

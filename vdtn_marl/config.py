@@ -15,7 +15,8 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
 
 ALGOS = ("mappo", "ippo")
@@ -689,7 +690,7 @@ def _validate_target(b: BenchmarkConfig) -> None:
             )
         b.target = BenchmarkTargetConfig(**dict(b.target))
     t = b.target
-    from vdtn_marl.leaderboard.grid import METRIC_KEYS
+    from vdtn_marl.experiment.metrics import METRIC_KEYS
 
     if t.scenario not in b.scenarios:
         raise ConfigError(

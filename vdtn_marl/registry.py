@@ -28,6 +28,8 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any
 
+from vdtn_marl.errors import DeprecatedEnvError, UnknownEnvError
+
 __all__ = [
     "ENTRY_POINT_GROUP",
     "DeprecatedEnvError",
@@ -44,21 +46,6 @@ ENTRY_POINT_GROUP = "vdtn_marl.envs"
 
 _ID_RE = re.compile(r"^[\w.-]+/[\w.-]+-v\d+$")
 _ID_FORM = "'namespace/name-vN' (e.g. 'vdtn/platoon-control-v0')"
-
-
-class UnknownEnvError(KeyError):
-    """Raised for an id that is not registered; the message lists the known ids."""
-
-    def __str__(self) -> str:  # KeyError would repr() the message
-        return str(self.args[0]) if self.args else ""
-
-
-class DeprecatedEnvError(UnknownEnvError):
-    """Raised for an id that a newer version supersedes (Gymnasium's ``DeprecatedEnv``).
-
-    A subclass of :class:`UnknownEnvError`, so code that handles unknown ids handles it too;
-    the message names the new id, what changed, and how to get the old behaviour.
-    """
 
 
 @dataclass(frozen=True)

@@ -35,6 +35,8 @@ from collections.abc import Iterable, Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from vdtn_marl.errors import RunFileError, RunWriteError
+
 METRICS_FILE = "metrics.csv"
 EVALUATION_FILE = "evaluation.csv"
 RAW_EVALUATION_FILE = "evaluation_raw.npz"  # arrays of the last evaluation, for plots
@@ -52,16 +54,6 @@ _log = logging.getLogger(__name__)
 def run_outputs(run_dir: str | Path) -> list[str]:
     """The names of :data:`RUN_OUTPUTS` present in ``run_dir`` (empty: it holds no run)."""
     return [name for name in RUN_OUTPUTS if (Path(run_dir) / name).exists()]
-
-
-class RunFileError(ValueError):
-    """A file of a run (metrics, evaluation, summary) that cannot be used to continue it; the
-    message names the file, the problem and what to do."""
-
-
-class RunWriteError(OSError):
-    """A run's file could not be written (a full disk, say); the previous version of the file,
-    if any, is intact. The message names the file and the cause."""
 
 
 #: Temporary files of :func:`atomic_write_bytes` (``.<name>.<random>.tmp``).

@@ -16,9 +16,9 @@ from pathlib import Path
 from vdtn_marl.algos.checkpoint import load_checkpoint, untrained_policies
 from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.config import RunConfig, to_dict, validate
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.results import TABLE_METRICS
 from vdtn_marl.runs import SUMMARY_FILE, atomic_write_json, metrics_line
-from vdtn_marl.sim.params import ConfigError
 
 _log = logging.getLogger(__name__)
 

@@ -19,6 +19,7 @@ from typing import Any
 import torch
 
 from vdtn_marl.config import LEARNED_RRA
+from vdtn_marl.errors import CheckpointError
 from vdtn_marl.runs import atomic_write_bytes
 
 _log = logging.getLogger(__name__)
@@ -39,10 +40,6 @@ SHAPE_KEYS = (
     "algo.num_cells",
     "control.augmentation",
 )
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be used; the message names the file and the problem."""
 
 
 class ShapeMismatch(CheckpointError):

@@ -64,6 +64,7 @@ from vdtn_marl.config import (
 from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.runs import (
     CHECKPOINT_DIR,
     EVALUATION_FILE,
@@ -83,7 +84,6 @@ from vdtn_marl.runs import (
 )
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")

@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from vdtn_marl.errors import TraceFormatError
+
 FT_TO_M = 0.3048
 """Feet to metres (exact, international foot)."""
 MPH_TO_MPS = 0.44704
@@ -85,21 +87,6 @@ class SpeedProfile:
 
     def __len__(self) -> int:
         return len(self.time_s)
-
-
-class TraceFormatError(ValueError):
-    """A trace file that cannot be read as the format it claims.
-
-    ``row`` is the 1-based data row (header excluded), or ``None`` for problems with the file
-    as a whole (a missing column, no data rows).
-    """
-
-    def __init__(self, path: str | Path, row: int | None, problem: str) -> None:
-        self.path = Path(path)
-        self.row = row
-        self.problem = problem
-        where = f"{self.path.name} row {row}" if row is not None else self.path.name
-        super().__init__(f"{where}: {problem}")
 
 
 # --------------------------------------------------------------------------------------------

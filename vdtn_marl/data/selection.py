@@ -34,7 +34,7 @@ from vdtn_marl.data.profiles import (
     vehicle_split_sources,
 )
 from vdtn_marl.data.traces import TraceSource, get_trace_source, trace_source_names
-from vdtn_marl.sim.params import ConfigError
+from vdtn_marl.errors import ConfigError
 
 FILE_FORMATS = tuple(sorted(LOADERS))
 """Values of ``scenario.traces`` that read ``scenario.trace_path``."""

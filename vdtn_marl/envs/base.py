@@ -15,7 +15,8 @@ import torch
 from pettingzoo import ParallelEnv
 
 from vdtn_marl.data.traces import TraceSource
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, ConfigError, TwinParams
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord, resolve_device
 

@@ -19,8 +19,8 @@ import numpy as np
 import torch
 
 from vdtn_marl.envs.base import check_kappa
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.link import SubframeOutcome
-from vdtn_marl.sim.params import ConfigError
 
 REWARD_KINDS = ("jocc", "drra", "throughput")
 

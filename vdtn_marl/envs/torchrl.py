@@ -44,9 +44,10 @@ from vdtn_marl.envs.base import (
 )
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator

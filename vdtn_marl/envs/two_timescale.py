@@ -57,9 +57,9 @@ from vdtn_marl.envs.base import (
 )
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
 from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
 
 

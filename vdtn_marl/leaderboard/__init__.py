@@ -3,10 +3,10 @@
 A benchmark (``conf/benchmark/*.yaml``, schema :class:`vdtn_marl.config.BenchmarkConfig`) is
 scenarios × methods × seeds. Every *cell* is one ``vdtn-marl jocc`` run: its config is composed
 by Hydra exactly as the command line composes it (``scenario=S experiment=E <overrides>
-<method> <budget> seed=K``), validated by :func:`vdtn_marl.cli_prepass.to_run_config`, and run by
-:func:`vdtn_marl.algos.api.jocc` in ``<out_dir>/<scenario>/<method>/seed<k>/``. Evaluation is
-seeded by the run's seed only (``EVAL_SEED_OFFSET + seed``), so every method of a scenario is
-evaluated on the same held-out leader traces, initial states and channel draws.
+<method> <budget> seed=K``), validated by :func:`vdtn_marl.experiment.compose.to_run_config`,
+and run by :func:`vdtn_marl.algos.api.jocc` in ``<out_dir>/<scenario>/<method>/seed<k>/``.
+Evaluation is seeded by the run's seed only (``EVAL_SEED_OFFSET + seed``), so every method of a
+scenario is evaluated on the same held-out leader traces, initial states and channel draws.
 
 :func:`run_benchmark` runs the grid cell by cell (``shard``/``num_shards`` split it between the
 jobs of a Hydra sweep), skipping every cell whose ``summary.json`` is complete, so rerunning the
@@ -39,16 +39,11 @@ directory's state), :mod:`~vdtn_marl.leaderboard.runner` (running the grid),
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-
+from vdtn_marl.errors import LeaderboardError
+from vdtn_marl.experiment.metrics import CAM_LATENCY_KEYS, METRIC_KEYS, METRICS, Metric
 from vdtn_marl.leaderboard.grid import (
-    CAM_LATENCY_KEYS,
     MANIFEST_FILE,
-    METRIC_KEYS,
-    METRICS,
     Cell,
-    LeaderboardError,
-    Metric,
     bench_config,
     cell_overrides,
     check_eval_pairing,
@@ -84,16 +79,6 @@ from vdtn_marl.leaderboard.stats import (
 )
 from vdtn_marl.leaderboard.target import check_target, fieller_ratio_ci
 
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m vdtn_marl.leaderboard ARGS`` = ``vdtn-marl bench ARGS``."""
-    import sys
-
-    from vdtn_marl import cli
-
-    return cli.main(["bench", *(sys.argv[1:] if argv is None else argv)])
-
-
 __all__ = [
     "CAM_LATENCY_KEYS",
     "INTERVALS",
@@ -123,7 +108,6 @@ __all__ = [
     "compose_cell",
     "describe_interval",
     "fieller_ratio_ci",
-    "main",
     "manifest",
     "marl_eval_data",
     "mean_ci",

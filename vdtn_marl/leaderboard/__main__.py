@@ -1,5 +1,6 @@
-"""``python -m vdtn_marl.leaderboard ARGS`` = ``vdtn-marl bench ARGS``."""
+"""``python -m vdtn_marl.leaderboard ARGS`` = ``vdtn-marl bench ARGS`` (an entry script: no
+module imports it, so the leaderboard itself never imports the command line)."""
 
-from vdtn_marl.leaderboard import main
+from vdtn_marl.cli import bench_main
 
-raise SystemExit(main())
+raise SystemExit(bench_main())

@@ -5,13 +5,29 @@ benchmark).
 
 from __future__ import annotations
 
-import contextlib
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from vdtn_marl.config import BenchConfig, BenchmarkConfig
+from vdtn_marl.errors import LeaderboardError
+
+# hydra_compose, CAM_LATENCY_KEYS, METRICS and Metric moved to vdtn_marl.experiment; they stay
+# importable from here for one release.
+from vdtn_marl.experiment.compose import (
+    compose_config,
+    hydra_compose,  # noqa: F401
+    job_config,
+    to_run_config,
+    translate,
+)
+from vdtn_marl.experiment.metrics import (
+    CAM_LATENCY_KEYS,  # noqa: F401
+    METRIC_KEYS,
+    METRICS,  # noqa: F401
+    Metric,  # noqa: F401
+)
 from vdtn_marl.runs import (
     SUMMARY_FILE,
     read_json,
@@ -20,38 +36,6 @@ from vdtn_marl.runs import (
 MANIFEST_FILE = "benchmark.json"
 #: Config keys a resumed cell may change (the rest must match the cell's own run).
 FREE_KEYS = ("resume", "progress", "device", "threads", "checkpoint")
-
-
-class LeaderboardError(Exception):
-    """A benchmark that cannot run or resume as asked; the message says why and what to do."""
-
-
-@dataclass(frozen=True)
-class Metric:
-    key: str  # summary.json key
-    label: str  # column header, with the unit
-    better: str | None  # "min", "max" or None (no "best" is marked)
-    table: bool = True  # shown in LEADERBOARD.md (every metric is in the JSON and CSV)
-
-
-METRICS = (
-    Metric("control_cost", "control cost", "min"),
-    Metric("gap_error_abs_m", "\\|gap error\\| (m)", "min"),
-    Metric("speed_error_abs_mps", "\\|speed error\\| (m/s)", "min"),
-    Metric("collision_rate", "collisions (fraction of scenarios)", "min"),
-    Metric("cam_delivery_rate", "CAM delivery rate", "max"),
-    Metric("cam_latency_ms_mean", "CAM latency mean (ms)", "min", table=False),
-    Metric("cam_latency_ms_p50", "CAM latency p50 (ms)", "min"),
-    Metric("cam_latency_ms_p95", "CAM latency p95 (ms)", "min"),
-    Metric("v2i_throughput_mbps_per_link", "V2I throughput per link (Mbps)", "max"),
-    Metric("evoi", "EVoI", None),
-    Metric("evoi_ci_low", "EVoI CI low (within run)", None, table=False),
-    Metric("evoi_ci_high", "EVoI CI high (within run)", None, table=False),
-    Metric("optimal_control_cost", "control cost of π*", None, table=False),
-)
-METRIC_KEYS = tuple(m.key for m in METRICS)
-#: Metrics that are undefined (null) when a run delivered no CAM at all.
-CAM_LATENCY_KEYS = ("cam_latency_ms_mean", "cam_latency_ms_p50", "cam_latency_ms_p95")
 
 
 @dataclass(frozen=True)
@@ -129,36 +113,15 @@ def bench_config(data: Mapping[str, Any]) -> BenchConfig:
     return BenchConfig(benchmark=benchmark, **values)
 
 
-@contextlib.contextmanager
-def hydra_compose() -> Iterator[None]:
-    """Hydra's compose API: inside a Hydra app it is ready; elsewhere initialise it here."""
-    from hydra import initialize_config_module
-    from hydra.core.global_hydra import GlobalHydra
-
-    from vdtn_marl import cli_help
-    from vdtn_marl.config import register_configs
-
-    if GlobalHydra.instance().is_initialized():
-        yield
-        return
-    register_configs()
-    with initialize_config_module(config_module=cli_help.CONFIG_PACKAGE, version_base="1.3"):
-        yield
-
-
 def compose_cell(cell: Cell, device: str) -> tuple[dict, Any]:
     """(composed config as plain data, validated RunConfig) of a cell, through the CLI's own
-    composition and validation (:func:`vdtn_marl.cli_prepass.to_run_config`)."""
-    from vdtn_marl import cli_errors, cli_prepass
-
+    composition and validation (:func:`vdtn_marl.experiment.compose.to_run_config`)."""
     overrides = [*cell.overrides, f"device={device}", "resume=true", "progress=false"]
     try:
-        data = cli_prepass.job_config(cli_prepass.compose_config("config", overrides))
-        return data, cli_prepass.to_run_config(data, "jocc")
+        data = job_config(compose_config("config", overrides))
+        return data, to_run_config(data, "jocc")
     except Exception as exc:
-        raise LeaderboardError(
-            f"cell {cell.name}: {cli_errors.translate(exc, 'config', overrides)}"
-        ) from exc
+        raise LeaderboardError(f"cell {cell.name}: {translate(exc, 'config', overrides)}") from exc
 
 
 def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:

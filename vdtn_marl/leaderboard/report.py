@@ -17,14 +17,10 @@ from vdtn_marl.config import BenchConfig
 from vdtn_marl.data.profiles import TIME_SPLIT_TRAIN_FRACTION
 from vdtn_marl.data.selection import split_in_time
 from vdtn_marl.data.traces import trace_set_provenance
-from vdtn_marl.leaderboard.grid import (
-    METRICS,
-    Cell,
-    LeaderboardError,
-    compose_cell,
-    hydra_compose,
-    plan,
-)
+from vdtn_marl.errors import LeaderboardError
+from vdtn_marl.experiment.compose import hydra_compose
+from vdtn_marl.experiment.metrics import METRICS
+from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan
 from vdtn_marl.leaderboard.plots import write_plots
 from vdtn_marl.leaderboard.stats import (
     IQM_TRIM,

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.config import BenchConfig, selected_cells
+from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
     Cell,
@@ -14,7 +15,6 @@ from vdtn_marl.leaderboard.grid import (
     check_out_dir,
     complete_summary,
     compose_cell,
-    hydra_compose,
     manifest,
     plan,
 )

@@ -28,7 +28,8 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from vdtn_marl.config import BENCHMARK_INTERVALS, BenchConfig, BenchmarkConfig
-from vdtn_marl.leaderboard.grid import METRICS, Cell, Metric, complete_summary
+from vdtn_marl.experiment.metrics import METRICS, Metric
+from vdtn_marl.leaderboard.grid import Cell, complete_summary
 from vdtn_marl.results import is_finite
 
 INTERVALS = BENCHMARK_INTERVALS  # ("t", "bca", "percentile")

@@ -35,7 +35,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from vdtn_marl.config import BenchmarkConfig, BenchmarkTargetConfig
-from vdtn_marl.leaderboard.grid import METRICS
+from vdtn_marl.experiment.metrics import METRICS
 from vdtn_marl.leaderboard.stats import t_ci
 from vdtn_marl.results import is_finite
 

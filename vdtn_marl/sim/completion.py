@@ -42,7 +42,8 @@ from typing import Any, Protocol, runtime_checkable
 import torch
 from torch import nn
 
-from vdtn_marl.sim.params import ConfigError, PlatoonParams, TwinParams
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.params import PlatoonParams, TwinParams
 from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, IntervalIntegrator
 
 __all__ = [

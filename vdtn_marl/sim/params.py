@@ -13,10 +13,7 @@ import numbers
 from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
-
-class ConfigError(ValueError):
-    """A parameter value outside its allowed range; the message names key, value and range."""
-
+from vdtn_marl.errors import ConfigError
 
 KAPPA_SUM_ABS_TOL = 1e-6
 """How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the

@@ -36,6 +36,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.data.traces import TraceSource, get_trace_source
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim import channel, link
 from vdtn_marl.sim.backend import (
     as_float,
@@ -55,7 +56,7 @@ from vdtn_marl.sim.layout import (
     RRA_DELAY_HISTORY,
     RRAFeatureLayout,
 )
-from vdtn_marl.sim.params import ConfigError, TwinParams
+from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import (
     IntervalIntegrator,
     PlatoonState,
