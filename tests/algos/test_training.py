@@ -1,5 +1,6 @@
 """MAPPO training, the PettingZooWrapper path, checkpoints and resume, RRA reward variants."""
 
+import math
 from dataclasses import replace
 
 import pytest
@@ -21,6 +22,7 @@ from vdtn_marl.config import (
     to_dict,
 )
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.runs import read_csv_rows
 from vdtn_marl.sim.layout import RRAFeatureLayout
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
@@ -231,6 +233,35 @@ def test_one_jocc_iteration_writes_metrics_and_a_loadable_checkpoint(tmp_path):
     assert summary["task"] == "jocc" and "task" not in summary["config"]
     payload = load_checkpoint(tmp_path / "checkpoints" / "last.pt", to_dict(cfg))
     assert payload["position"]["iteration"] == 1
+    # every PPO iteration of every stage logs PPO's health beside its losses
+    rows = read_csv_rows(tmp_path / "metrics.csv")
+    assert {r["stage"] for r in rows} == {"control_perfect", "control_impaired", "rra"}
+    for row in rows:
+        assert 0.0 <= float(row["clip_fraction"]) <= 1.0, row
+        assert math.isfinite(float(row["kl_approx"])), row
+        assert float(row["explained_variance"]) <= 1.0, row
+
+
+def test_ppo_health_reads_zero_kl_and_no_clipping_when_the_policy_cannot_move():
+    """With lr = 0 the updated policy is the collecting one: ratio 1 everywhere, so nothing is
+    clipped and TorchRL's approximate KL is 0 (to the rounding of recomputed log-probabilities);
+    with a large lr PPO moves and clips."""
+    from torchrl.envs.libs.pettingzoo import PettingZooWrapper
+
+    def stats(lr: float):
+        env = PettingZooWrapper(
+            vdtn_marl.make("vdtn/platoon-control-v0", episode_intervals=30),
+            return_state=False,
+            use_mask=False,
+        )
+        algo = replace(TINY_ALGO, rollout_steps=20, lr=lr, epochs=4)
+        return PPOTrainer(env, "vehicle", algo, seed=1).train_iteration()
+
+    frozen = stats(0.0)
+    assert abs(frozen.kl_approx) < 1e-6 and frozen.clip_fraction == 0.0
+    assert math.isfinite(frozen.explained_variance) and frozen.explained_variance <= 1.0
+    moving = stats(0.05)
+    assert abs(moving.kl_approx) > 1e-4 and 0.0 < moving.clip_fraction <= 1.0
 
 
 def test_summary_lists_each_jocc_iterations_evaluation(tmp_path):

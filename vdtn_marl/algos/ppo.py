@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import contextlib
 import copy
+import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -60,6 +61,11 @@ VALIDATION_ITERATION = SEED_STRIDE - 2
 SCALING_MID_EPISODE_ITERATION = SEED_STRIDE - 4  # -3: imitation's DISTILLATION_ITERATION
 
 
+#: The terms of the clipped loss that are optimised, and the diagnostics it returns beside them.
+LOSS_KEYS = ("loss_objective", "loss_critic", "loss_entropy")
+HEALTH_KEYS = ("kl_approx", "clip_fraction", "explained_variance")
+
+
 @dataclass
 class IterationStats:
     """What one collect-and-update iteration did (rewards per agent per step of its clock)."""
@@ -71,6 +77,10 @@ class IterationStats:
     loss_objective: float
     loss_critic: float
     loss_entropy: float
+    # PPO health, means over the iteration's minibatches (as ClipPPOLoss returns them):
+    kl_approx: float  # approximate KL of the updated policy from the collecting one
+    clip_fraction: float  # share of samples whose probability ratio was clipped
+    explained_variance: float  # of the value targets by the critic
     lr: float  # learning rate of the iteration's update
     validation_return: float  # of the deterministic policy after the update (NaN: not scored)
     seconds: float
@@ -244,7 +254,7 @@ class PPOTrainer:
         flat = data.reshape(-1)
         n = flat.shape[0]
         size = min(self.algo.minibatch_size, n)
-        sums = {"loss_objective": 0.0, "loss_critic": 0.0, "loss_entropy": 0.0}
+        sums = dict.fromkeys(LOSS_KEYS + HEALTH_KEYS, 0.0)
         steps = 0
         for _ in range(self.algo.epochs):
             order = torch.randperm(n, device=self.device)
@@ -257,7 +267,8 @@ class PPOTrainer:
                 torch.nn.utils.clip_grad_norm_(self.loss.parameters(), self.algo.max_grad_norm)
                 self.optimizer.step()
                 for key in sums:
-                    sums[key] += float(losses[key].detach())
+                    value = losses.get(key, None)
+                    sums[key] += math.nan if value is None else float(value.detach().mean())
                 steps += 1
         return {key: value / max(steps, 1) for key, value in sums.items()}
 
