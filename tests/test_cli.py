@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli, cli_help, cli_prepass
+from vdtn_marl import cli, cli_help, cli_prepass, config
 
 # Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli.py).
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
@@ -326,9 +326,11 @@ def test_group_options_as_documented():
         "platoon4_noise90",
     }
     assert set(cli_help.group_options("algo")) == {"mappo", "ippo"}
-    assert set(cli_help.group_options("rra")) == {
-        "jocc", "drra", "throughput", "random", "round_robin", "greedy",
-    }  # fmt: skip
+    # one YAML per learned-RRA reward and per registered baseline, and no other
+    assert set(cli_help.group_options("rra")) == set(config.RRA_METHODS)
+    assert {"jocc", "drra", "throughput", "random", "round_robin", "greedy"} <= set(
+        config.RRA_METHODS
+    )
     assert set(cli_help.group_options("control")) == {"learned", "cacc", "oracle", "causal_mpc"}
     assert set(cli_help.group_options("experiment")) == {"smoke", "default", "paper"}
     launchers = set(cli_help.group_options("hydra/launcher"))

@@ -154,7 +154,9 @@ def test_cli_refuses_bad_traces_and_tasks_in_one_line_and_writes_nothing(
 
 def test_task_rra_needs_a_learned_rra_method():
     cfg = RunConfig(task="rra")
-    for name in ("random", "round_robin", "greedy"):
+    from vdtn_marl.algos.rra_baselines import RRA_BASELINES
+
+    for name in RRA_BASELINES:
         with pytest.raises(ConfigError, match=f"rra={name} has nothing to learn"):
             validate(replace(cfg, rra=replace(cfg.rra, name=name)))
     validate(replace(cfg, rra=replace(cfg.rra, name="drra")))

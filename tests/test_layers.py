@@ -46,7 +46,6 @@ LAYERS = {
 KNOWN_UPWARD = {
     ("vdtn_marl.algos.api", "vdtn_marl.config"),
     ("vdtn_marl.algos.api", "vdtn_marl.results"),
-    ("vdtn_marl.algos.checkpoint", "vdtn_marl.config"),
     ("vdtn_marl.algos.jocc", "vdtn_marl.config"),
     ("vdtn_marl.algos.jocc", "vdtn_marl.results"),
     ("vdtn_marl.algos.ppo", "vdtn_marl.config"),

@@ -15,6 +15,8 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
+from vdtn_marl.algos.rra_baselines import RRA_BASELINES
+from vdtn_marl.envs.rra_reward import REWARD_KINDS
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
@@ -23,8 +25,8 @@ ALGOS = ("mappo", "ippo")
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
 RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations
-RRA_METHODS = ("jocc", "drra", "throughput", "random", "round_robin", "greedy")
-LEARNED_RRA = ("jocc", "drra", "throughput")
+LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
+RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
 IVOI_ESTIMATORS = ("td", "rollout")
 VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")

@@ -46,13 +46,13 @@ from vdtn_marl.algos.mpc_oracle import (
     OracleController,
 )
 from vdtn_marl.algos.rra_baselines import (
+    RRA_BASELINES,
     GreedyRRAPolicy,
     RoundRobinRRAPolicy,
     RRAFeatureLayout,
     encode_rra_action,
     max_power_level,
 )
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import PlatoonParams, TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
@@ -74,11 +74,6 @@ __all__ = [
 ]
 
 
-RRA_BASELINES: dict[str, type] = {
-    "random": RandomRRAPolicy,
-    "round_robin": RoundRobinRRAPolicy,
-    "greedy": GreedyRRAPolicy,
-}
 CONTROL_BASELINES: dict[str, type] = {
     "cacc": CACCController,
     "oracle": OracleController,
@@ -100,7 +95,8 @@ def _twin_params(twin_or_params) -> tuple[TwinParams, DigitalTwin | None]:
 def make_rra_baseline(
     name: str, twin_or_params: DigitalTwin | TwinParams | None = None, seed: int | None = None
 ):
-    """An RRA baseline by name (``"random"``, ``"round_robin"``, ``"greedy"``).
+    """An RRA baseline by name, one of :data:`~vdtn_marl.algos.rra_baselines.RRA_BASELINES`
+    (``"random"``, ``"round_robin"``, ``"greedy"``, ...).
 
     Sizes (L links, M sub-channels, P power levels) come from the twin or the parameters
     (default ``TwinParams()``). ``seed`` seeds ``"random"`` (the others are deterministic).
@@ -111,14 +107,7 @@ def make_rra_baseline(
             f"RRA baseline {name!r} is not one of {', '.join(repr(k) for k in RRA_BASELINES)}"
         )
     params, _ = _twin_params(twin_or_params)
-    radio, links = params.radio, params.platoon.num_followers
-    if name == "random":
-        return RandomRRAPolicy(radio.num_actions, seed)
-    if name == "round_robin":
-        return RoundRobinRRAPolicy(
-            links, radio.num_subchannels, radio.num_power_levels, max_power_level(radio)
-        )
-    return GreedyRRAPolicy(links, radio)
+    return RRA_BASELINES[name](params, seed)
 
 
 def make_control_baseline(

@@ -5,7 +5,11 @@ actions ``[..., L]`` of the same kind, like :class:`~vdtn_marl.envs.policies.Ran
 Action encoding (``vdtn_marl.sim.link.ActionTables``): a = c·P + l for sub-channel c ∈ [0, M)
 and power level l ∈ [0, P); ``RadioParams.v2v_power_levels_dbm`` lists levels 0..P−2 (23, 15,
 5 dBm by default, level 0 the highest) and the last level P−1 is "off". Build them by name
-with :func:`vdtn_marl.algos.baselines.make_rra_baseline`.
+with :func:`vdtn_marl.algos.baselines.make_rra_baseline`, which reads :data:`RRA_BASELINES`.
+
+A new RRA baseline is its class (here or in a file of its own), one line in
+:data:`RRA_BASELINES`, and ``conf/rra/<name>.yaml``; config validation, ``rra=<name>``, the
+evaluation and the tests read the registry.
 """
 
 from __future__ import annotations
@@ -15,8 +19,9 @@ import math
 import numpy as np
 import torch
 
+from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.layout import RRA_OBS_GAIN_SCALE_DB, RRAFeatureLayout
-from vdtn_marl.sim.params import RadioParams
+from vdtn_marl.sim.params import RadioParams, TwinParams
 
 _LN10_OVER_10 = math.log(10.0) / 10.0
 
@@ -162,3 +167,33 @@ class GreedyRRAPolicy:
         best = self.scores_db(observation).argmax(-1)
         actions = encode_rra_action(best, self.power_level, self.num_power_levels)
         return actions.astype(np.int64) if isinstance(actions, np.ndarray) else actions.long()
+
+
+# --------------------------------------------------------------------------------- registry
+
+
+def _random(params: TwinParams, seed: int | None) -> RandomRRAPolicy:
+    return RandomRRAPolicy(params.radio.num_actions, seed)
+
+
+def _round_robin(params: TwinParams, seed: int | None) -> RoundRobinRRAPolicy:
+    radio = params.radio
+    return RoundRobinRRAPolicy(
+        params.platoon.num_followers,
+        radio.num_subchannels,
+        radio.num_power_levels,
+        max_power_level(radio),
+    )
+
+
+def _greedy(params: TwinParams, seed: int | None) -> GreedyRRAPolicy:
+    return GreedyRRAPolicy(params.platoon.num_followers, params.radio)
+
+
+#: The non-learned RRA policies, name → factory ``(params, seed) -> policy`` (``seed`` seeds
+#: the random one; the others are deterministic). ``rra=<name>`` selects one.
+RRA_BASELINES = {
+    "random": _random,
+    "round_robin": _round_robin,
+    "greedy": _greedy,
+}
