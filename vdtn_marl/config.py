@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
 from vdtn_marl.algos.rra_baselines import RRA_BASELINES
-from vdtn_marl.envs.rra_reward import REWARD_KINDS
+from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
@@ -153,10 +153,11 @@ class ControlConfig:
 
 @dataclass
 class RRAConfig:
-    """Who allocates sub-channel × power for the V2V links, and the reward it learns from."""
+    """Who allocates sub-channel × power for the V2V links, and the reward it learns from
+    (the reward's defaults are those of :class:`~vdtn_marl.envs.rra_reward.RRAReward`)."""
 
     name: str = "jocc"
-    kappa1: float = 0.5  # weight of V2I throughput
+    kappa1: float = RRAReward.kappa1  # weight of V2I throughput
     kappa2: float | None = None  # weight of IVoI; None means 1 − κ1
     ivoi_estimator: str = "td"
     rollout_intervals: int = 10  # rollout estimator: intervals rolled out with π*
@@ -168,9 +169,9 @@ class RRAConfig:
     # states the acting system visits, to rollouts of π* (acting; vdtn_marl/algos/value_fit.py)
     value_fit: str = "none"
     value_fit_horizon: int = 100  # value_fit=acting: intervals of π* per target, then its critic
-    throughput_scale: float = 0.004  # reward units per Mbps of summed V2I rate
-    ivoi_scale: float = 20.0  # multiplies ξ before κ2
-    miss_penalty: float = 1.0  # drra: penalty of a CAM that misses its interval
+    throughput_scale: float = RRAReward.throughput_scale  # reward units per Mbps of summed V2I rate
+    ivoi_scale: float = RRAReward.ivoi_scale  # multiplies ξ before κ2
+    miss_penalty: float = RRAReward.miss_penalty  # drra: penalty of a CAM that misses its interval
 
     @property
     def learned(self) -> bool:

@@ -68,14 +68,14 @@ class TwoTimescaleEnv(VDTNParallelEnv):
 
     def __init__(
         self,
-        kappa1: float = 0.5,
+        kappa1: float = RRAReward.kappa1,
         kappa2: float | None = None,
         reward: str = "jocc",
         ivoi_estimator: str | IVoIEstimator = "rollout",
         ivoi_horizon_intervals: int = 10,
-        throughput_scale: float = 0.004,
-        ivoi_scale: float = 20.0,
-        miss_penalty: float = 1.0,
+        throughput_scale: float = RRAReward.throughput_scale,
+        ivoi_scale: float = RRAReward.ivoi_scale,
+        miss_penalty: float = RRAReward.miss_penalty,
         vehicles_are_agents: bool = True,
         control_module: Callable | None = None,
         seed: int | None = None,
