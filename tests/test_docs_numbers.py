@@ -1,0 +1,34 @@
+"""Figures quoted in the README come from the committed, generated results (no retyping)."""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+HEADLINE = json.loads((ROOT / "benchmarks/results/headline/leaderboard.json").read_text())
+
+
+def _one_line(text: str) -> str:
+    return re.sub(r"\s+", " ", text)
+
+
+def test_readme_quotes_the_headline_target_as_generated():
+    criteria = {c["metric"]: c for c in HEADLINE["target"]["criteria"]}
+    assert HEADLINE["target"]["status"] == "missed"
+    gap, speed = criteria["gap_error_abs_m"], criteria["speed_error_abs_mps"]
+    expected = (
+        f"its |gap error| is {gap['estimate']:.2f} times DRRA's "
+        f"[{gap['ci_low']:.2f}, {gap['ci_high']:.2f}] and its |speed error| "
+        f"{speed['estimate']:.2f} times [{speed['ci_low']:.2f}, {speed['ci_high']:.2f}]"
+    )
+    assert expected in _one_line(README)
+
+
+def test_readme_quotes_the_headline_cam_delivery_as_generated():
+    stats = HEADLINE["statistics"][HEADLINE["target"]["scenario"]]
+    jocc = 100 * stats[HEADLINE["target"]["method"]]["cam_delivery_rate"]["mean"]
+    drra = 100 * stats[HEADLINE["target"]["reference"]]["cam_delivery_rate"]["mean"]
+    assert f"({jocc:.1f} % delivered, DRRA {drra:.1f} %)" in _one_line(README)
