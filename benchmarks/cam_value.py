@@ -104,7 +104,6 @@ from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import bind_to_twin
-from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.benchmarking import (
     checkpoint_run,
     ci_summary,
@@ -112,6 +111,7 @@ from vdtn_marl.benchmarking import (
     provenance,
     table_console,
 )
+from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.results import pyplot_agg, save_figure
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord

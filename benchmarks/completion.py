@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from vdtn_marl.algos.completion import train_completion_predictor
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.runs import atomic_write_json, script_command
 from vdtn_marl.sim.cacc import CACCController
@@ -45,7 +46,6 @@ from vdtn_marl.sim.completion import (
     CAM_COMMAND,
     COMPLETION_MODES,
     make_completion,
-    train_completion_predictor,
 )
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin

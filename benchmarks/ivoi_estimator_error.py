@@ -39,9 +39,9 @@ from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import CriticValue
 from vdtn_marl.benchmarking import checkpoint_run, loaded_checkpoints, parse_names, provenance
+from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.voi import TDIVoIEstimator
 

@@ -38,7 +38,6 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.benchmarking import parse_numbers, parse_seeds, provenance
 from vdtn_marl.config import (
     AlgoConfig,
@@ -49,6 +48,7 @@ from vdtn_marl.config import (
     ScenarioConfig,
     validate,
 )
+from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 

@@ -60,7 +60,6 @@ from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.benchmarking import (
     checkpoint_run,
@@ -71,6 +70,7 @@ from vdtn_marl.benchmarking import (
     table_console,
 )
 from vdtn_marl.config import IVOI_ESTIMATORS
+from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi

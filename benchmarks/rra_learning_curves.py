@@ -1,7 +1,7 @@
 """Learning curves of the JOCC and DRRA RRA agents: how many RRA iterations to a plateau?
 
 For each method (``--methods``) × RRA learning problem (``--credits``) × seed, a JOCC iteration
-is run stage by stage with :class:`~vdtn_marl.algos.jocc.JointOptimisation`'s own stages:
+is run stage by stage with :class:`~vdtn_marl.experiment.jocc.JointOptimisation`'s own stages:
 π* (perfect observation; warm-started from the causal MPC unless ``--no-warm-start``) and π̃
 (impaired observations under random RRA) for ``--control-iterations`` PPO iterations each, as
 JOCC's iteration 0 does; then the RRA agents train for ``--rra-iterations`` PPO iterations
@@ -86,7 +86,6 @@ from rich.table import Table
 from vdtn_marl.algos.baselines import make_rra_baseline
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.benchmarking import parse_names, parse_seeds, provenance, table_console
 from vdtn_marl.config import (
@@ -99,6 +98,7 @@ from vdtn_marl.config import (
     validate,
 )
 from vdtn_marl.data import trace_source_names
+from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.runs import atomic_write_json, read_json
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import mean_ci

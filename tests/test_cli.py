@@ -4,7 +4,7 @@ Bad configs are checked in-process through ``cli.main`` as well (same code path,
 torch's import time once per case) and, for a few cases, in a subprocess for the real exit
 code and stderr.
 
-The tests named ``*_real`` run the real entry points of ``vdtn_marl.algos.api`` (a smoke
+The tests named ``*_real`` run the real entry points of ``vdtn_marl.experiment.api`` (a smoke
 `train` then `eval`, a two-job joblib sweep). The tests named ``*_fake_entry_points`` check CLI
 plumbing that does not depend on training (the submitit and Ray launchers) with a fake ``api``
 installed by a ``sitecustomize`` module on PYTHONPATH, so that launcher worker processes see it
@@ -63,10 +63,10 @@ if os.environ.get("VDTN_MARL_FAKE_API"):
         api.train = api.jocc = api.evaluate = _fake
 
     class _PatchApi(importlib.abc.MetaPathFinder):
-        """Patch vdtn_marl.algos.api right after it is imported (only processes that use it)."""
+        """Patch vdtn_marl.experiment.api right after it is imported (only processes using it)."""
 
         def find_spec(self, name, path, target=None):
-            if name != "vdtn_marl.algos.api":
+            if name != "vdtn_marl.experiment.api":
                 return None
             sys.meta_path.remove(self)
             spec = importlib.util.find_spec(name)
@@ -386,7 +386,7 @@ def test_benchmark_cfg_job_shows_version(tmp_path):
 
 def test_resume_reuses_the_run_dir(tmp_path, monkeypatch, capsys):
     """In-process, with a fake entry point: resume=true reruns the job in the same dir."""
-    from vdtn_marl.algos import api
+    from vdtn_marl.experiment import api
 
     calls = []
 

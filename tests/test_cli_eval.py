@@ -36,7 +36,7 @@ def _compose(overrides: list[str]) -> dict:
 def _make_run(run_dir: Path, overrides: list[str], task: str = "jocc", trained=()) -> dict:
     """A run folder as `vdtn-marl` leaves it: config.yaml and checkpoints/last.pt of a loop
     built from ``overrides`` whose trainers ``trained`` count one PPO iteration."""
-    from vdtn_marl.algos.jocc import JointOptimisation
+    from vdtn_marl.experiment.jocc import JointOptimisation
 
     data = _compose(overrides)
     run_cfg = cli_prepass.to_run_config(dict(data), task)
@@ -58,7 +58,7 @@ def _one_line(err: str, *fragments: str) -> str:
 
 
 def _fake_entry(monkeypatch, name: str, calls: list) -> None:
-    from vdtn_marl.algos import api
+    from vdtn_marl.experiment import api
 
     def fake(cfg, run_dir):
         calls.append(cfg)
@@ -268,8 +268,8 @@ def test_sweeps_into_new_folders_run_and_a_used_sweep_folder_is_refused(
 
 
 def test_ctrl_c_prints_how_to_continue_and_exits_130(tmp_path, monkeypatch, capsys):
-    from vdtn_marl.algos import api
     from vdtn_marl.algos.checkpoint import save_checkpoint
+    from vdtn_marl.experiment import api
 
     def interrupted(cfg, run_dir):
         save_checkpoint(Path(run_dir) / "checkpoints" / "last.pt", {"task": "jocc"})
@@ -402,7 +402,7 @@ class _FakeLoop:
 def test_the_run_log_has_start_checkpoints_and_final_metrics(
     progress, tmp_path, monkeypatch, capsys
 ):
-    from vdtn_marl.algos import api
+    from vdtn_marl.experiment import api
 
     monkeypatch.setattr(api, "JointOptimisation", _FakeLoop)
     monkeypatch.chdir(tmp_path)

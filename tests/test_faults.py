@@ -21,8 +21,8 @@ import torch
 
 import vdtn_marl
 from vdtn_marl.algos.checkpoint import load_checkpoint
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.data.traces import TraceInfo
+from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.runs import (
     LOCK_FILE,
     RunFileError,

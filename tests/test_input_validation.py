@@ -9,9 +9,9 @@ import pytest
 
 import vdtn_marl
 from vdtn_marl import cli
-from vdtn_marl.algos.jocc import trace_sources
 from vdtn_marl.config import RunConfig, validate
 from vdtn_marl.data.profiles import load_train_eval_sources
+from vdtn_marl.experiment.jocc import trace_sources
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.twin import resolve_device
 
@@ -220,7 +220,7 @@ def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
 
 
 def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
-    from vdtn_marl.algos.jocc import main
+    from vdtn_marl.experiment.jocc import main
 
     with pytest.raises(SystemExit) as info:
         main(["--kappa1", "2", "--run-dir", str(tmp_path / "run")])
@@ -230,7 +230,7 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
 
 
 def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkeypatch):
-    from vdtn_marl.algos import jocc
+    from vdtn_marl.experiment import jocc
 
     run = tmp_path / "run"
     (run / "checkpoints").mkdir(parents=True)

@@ -10,7 +10,6 @@ from types import SimpleNamespace
 import pytest
 import torch
 
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.config import (
     AlgoConfig,
     ControlConfig,
@@ -19,6 +18,7 @@ from vdtn_marl.config import (
     RunConfig,
     ScenarioConfig,
 )
+from vdtn_marl.experiment.jocc import JointOptimisation
 
 BENCHMARKS = Path(__file__).resolve().parents[1] / "benchmarks"
 

@@ -85,7 +85,7 @@ def loaded_checkpoints(paths, scratch_prefix: str, console=None):
     the loops write to a scratch directory removed at the end (nothing lands next to the
     checkpoints). A bad checkpoint stops the script with its error."""
     from vdtn_marl.algos.checkpoint import CheckpointError
-    from vdtn_marl.algos.jocc import JointOptimisation
+    from vdtn_marl.experiment.jocc import JointOptimisation
 
     with tempfile.TemporaryDirectory(prefix=scratch_prefix) as scratch:
         for number, path in enumerate(paths):

@@ -3,7 +3,7 @@
     vdtn-marl [-m] COMMAND [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]
 
 ``train``, ``jocc`` and ``eval`` compose ``conf/config.yaml`` (schema
-:class:`vdtn_marl.config.RunConfig`) and call :mod:`vdtn_marl.algos.api`; ``bench`` composes
+:class:`vdtn_marl.config.RunConfig`) and call :mod:`vdtn_marl.experiment.api`; ``bench`` composes
 ``conf/bench.yaml`` (``bench summarize DIR`` tables a finished sweep); ``envs`` lists the
 registry; ``rollout`` forwards to :mod:`vdtn_marl.rollout`.
 
@@ -256,8 +256,8 @@ def run_job(command: str, cfg: Any) -> dict:
     from omegaconf import OmegaConf
 
     from vdtn_marl import results
-    from vdtn_marl.algos import api
     from vdtn_marl.algos.checkpoint import CheckpointError
+    from vdtn_marl.experiment import api
     from vdtn_marl.runs import (
         CONFIG_FILE,
         RunFileError,

@@ -7,10 +7,10 @@ import torch
 
 from vdtn_marl.algos.baselines import OracleController
 from vdtn_marl.algos.imitation import DistillationStats, distill_teacher, distillation_ticks
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.algos.ppo import PPOTrainer
 from vdtn_marl.config import AlgoConfig, ControlConfig, ExperimentConfig, RunConfig, ScenarioConfig
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
@@ -116,7 +116,7 @@ def test_jocc_warm_start_imitates_the_causal_mpc_before_the_first_pi_star_stage(
         calls.append((trainer, teacher, trainer.iteration, kwargs))
         return DistillationStats(rounds=3, samples=6, rms_error_mps2=0.25, seconds=0.0)
 
-    monkeypatch.setattr("vdtn_marl.algos.jocc.distill_teacher", fake_distill)
+    monkeypatch.setattr("vdtn_marl.experiment.jocc.distill_teacher", fake_distill)
     experiment = ExperimentConfig(
         control_iterations=1, rra_iterations=1, eval_episodes=2, eval_intervals=10,
         checkpoint_every=0, jocc_iterations=2,

@@ -9,7 +9,6 @@ import torch
 import vdtn_marl
 from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.algos.networks import scalers
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.config import (
@@ -22,6 +21,7 @@ from vdtn_marl.config import (
     to_dict,
 )
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.runs import read_csv_rows
 from vdtn_marl.sim.layout import RRAFeatureLayout
 from vdtn_marl.sim.params import ConfigError, TwinParams

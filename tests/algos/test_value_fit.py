@@ -8,11 +8,11 @@ import pytest
 import torch
 from test_training import TINY_ALGO, TINY_EXPERIMENT, tiny_config  # the tiny run of its tests
 
-from vdtn_marl.algos.jocc import JointOptimisation
 from vdtn_marl.algos.ppo import CriticValue, PPOTrainer
 from vdtn_marl.algos.value_fit import fit_critic
 from vdtn_marl.config import ConfigError, RRAConfig, validate
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import perfect_observation
 from vdtn_marl.sim.twin import DigitalTwin

@@ -8,6 +8,7 @@ import torch
 from torchrl.envs.utils import check_env_specs
 
 import vdtn_marl
+from vdtn_marl.algos.completion import train_completion_predictor
 from vdtn_marl.data import TraceInfo, trace_set_provenance, trace_source_names
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.torchrl import MODES as TORCHRL_MODES
@@ -26,7 +27,6 @@ from vdtn_marl.sim.completion import (
     load_completion_predictor,
     make_completion,
     save_completion_predictor,
-    train_completion_predictor,
 )
 from vdtn_marl.sim.params import ConfigError
 

@@ -167,7 +167,7 @@ def test_config_switch_defaults_to_disjoint_and_is_validated():
 
 
 def test_jocc_evaluates_on_disjoint_windows_when_asked():
-    from vdtn_marl.algos.jocc import trace_sources
+    from vdtn_marl.experiment.jocc import trace_sources
     from vdtn_marl.sim.twin import DigitalTwin
 
     cfg = RunConfig()

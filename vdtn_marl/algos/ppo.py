@@ -7,7 +7,7 @@ environment's own ``rollout`` (the batched face is already vectorised over B sce
 collector would add nothing but a copy).
 
 Training stages (:meth:`PPOTrainer.begin_stage` … :meth:`PPOTrainer.finish_stage`) add two
-switches of :class:`~vdtn_marl.config.AlgoConfig`: ``lr_schedule="linear"`` anneals the
+switches of :class:`~vdtn_marl.algos.params.AlgoConfig`: ``lr_schedule="linear"`` anneals the
 learning rate linearly to zero over the stage, and ``validate_every=N`` scores the
 deterministic policy at the stage's start, every N iterations and at the stage's last on fixed
 validation scenarios (``validation_scenarios`` of them, seeded apart from the training and
@@ -49,7 +49,7 @@ from torchrl.envs import EnvBase
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
 from vdtn_marl.algos.networks import make_actor, make_critic, scalers
-from vdtn_marl.config import AlgoConfig
+from vdtn_marl.algos.params import AlgoConfig
 
 #: Iteration seeds are spread so that no two iterations (or two runs with nearby seeds) share
 #: scenarios: seed_for(k) = seed · SEED_STRIDE + k.
@@ -96,8 +96,8 @@ class PPOTrainer:
         env: a batched TorchRL environment with the group's nested keys (e.g.
             :class:`~vdtn_marl.envs.torchrl.VDTNTorchRLEnv`, or a ``PettingZooWrapper``).
         group: ``"vehicle"`` or ``"rra"``.
-        algo: hyper-parameters (:class:`~vdtn_marl.config.AlgoConfig`); ``algo.name == "mappo"``
-            gives the critic the whole group's observations.
+        algo: hyper-parameters (:class:`~vdtn_marl.algos.params.AlgoConfig`);
+            ``algo.name == "mappo"`` gives the critic the whole group's observations.
         seed: seeds the scenarios of every iteration (see the module doc).
         drop_features: observation features the actor must not see (the critic sees all).
         prior: controller the continuous policy starts from (see

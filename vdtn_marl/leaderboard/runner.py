@@ -31,7 +31,7 @@ def run_cell(cell: Cell, data: dict, run_cfg: Any, out_dir: str | Path) -> dict:
     """Run (or continue) one cell in its directory and return its summary."""
     from omegaconf import OmegaConf
 
-    from vdtn_marl.algos import api
+    from vdtn_marl.experiment import api
 
     cell_dir = cell.directory(out_dir)
     cell_dir.mkdir(parents=True, exist_ok=True)

@@ -12,7 +12,8 @@ its value at the interval start kΔt, from the stale CAM and the follower's loca
 - ``"kalman"``: a batched Kalman filter per follower over the predecessor's acceleration and
   jerk (:class:`KalmanCompletion`).
 - ``"learned"``: a small MLP over a window of local-sensing features, trained on twin rollouts
-  with :func:`train_completion_predictor` (:class:`LearnedCompletion`).
+  with :func:`vdtn_marl.algos.completion.train_completion_predictor`
+  (:class:`LearnedCompletion`).
 
 Protocol (:class:`Completion`): ``complete(observation [B, F, 8], interval [B] | None,
 mask [B] | None) -> observation`` and ``reset(mask [B] | None)``. Only features 3 and 4 of
@@ -33,8 +34,6 @@ acceleration over that interval: z = (Δe_v + Δv_i)/Δt. The twin's sensing is 
 from __future__ import annotations
 
 import os
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -43,7 +42,7 @@ import torch
 from torch import nn
 
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.params import PlatoonParams, TwinParams
+from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, IntervalIntegrator
 
 __all__ = [
@@ -57,7 +56,6 @@ __all__ = [
     "load_completion_predictor",
     "make_completion",
     "save_completion_predictor",
-    "train_completion_predictor",
 ]
 
 COMPLETION_MODES = ("none", "hold", "kalman", "learned")
@@ -542,20 +540,6 @@ class LearnedCompletion(RecursiveCompletion):
         return new_state, estimate
 
 
-class _FeatureRecorder(LearnedCompletion):
-    """Runs the feature pipeline of :class:`LearnedCompletion` and keeps the last features."""
-
-    def __init__(self, window: int, params: PlatoonParams):
-        RecursiveCompletion.__init__(self, params)
-        self.window = window
-        self.features: torch.Tensor | None = None
-
-    def _advance(self, state, observation, steps):
-        new_state, features = self._features(state, observation, steps)
-        self.features = features.float()
-        return new_state, observation[..., CAM_ACCEL : CAM_COMMAND + 1].double()
-
-
 # ---------------------------------------------------------------------------- files
 def save_completion_predictor(predictor: CompletionPredictor, path: str | os.PathLike) -> Path:
     """Save ``predictor`` (config and weights) atomically; load it with
@@ -621,162 +605,21 @@ def load_completion_predictor(
     return predictor.to(device).eval()
 
 
-# ---------------------------------------------------------------------------- training
-def collect_completion_data(
-    params: TwinParams | None = None,
-    seed: int = 0,
-    *,
-    batch_size: int = 128,
-    episodes: int = 1,
-    intervals: int | None = 100,
-    window: int = 6,
-    device: str | torch.device = "cpu",
-    trace_source=None,
-    rra_policy: Callable | None = None,
-    command_noise_mps2: float = 0.2,
-) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """Impaired twin rollouts → (features [S, D], targets [S, 2], stale [S]) per follower-interval.
-
-    The twin runs ``episodes`` episodes of ``batch_size`` scenarios, the first ``intervals``
-    intervals of each (all with ``None``), with ``rra_policy`` (random by default) and linear
-    CACC on the impaired observations, plus Gaussian command noise for variety. Targets are the
-    predecessor's exact acceleration and command at kΔt; rows of a scenario after a collision
-    are dropped.
-    """
-    from vdtn_marl.envs.policies import RandomRRAPolicy
-    from vdtn_marl.sim.cacc import CACCController
-    from vdtn_marl.sim.twin import DigitalTwin
-
-    params = params or TwinParams()
-    length = (
-        params.episode_intervals if intervals is None else min(intervals, params.episode_intervals)
-    )
-    if length < 1 or episodes < 1:
-        raise ConfigError(f"intervals={intervals!r} and episodes={episodes!r} must be >= 1")
-    twin = DigitalTwin(
-        params, batch_size=batch_size, device=device, seed=seed, trace_source=trace_source
-    )
-    rra = rra_policy or RandomRRAPolicy(params.radio.num_actions, seed)
-    controller = CACCController(params.platoon)
-    recorder = _FeatureRecorder(window, params.platoon)
-    gen = torch.Generator(device=twin.device)
-    gen.manual_seed(seed + 1)
-    feats, targets, stale = [], [], []
-    pp = params.platoon
-    for episode in range(episodes):
-        if episode:
-            twin.reset()
-        recorder.reset()
-        alive = torch.ones(batch_size, dtype=torch.bool, device=twin.device)
-        for _ in range(length):
-            for _ in range(twin.subframes_per_interval):
-                actions = torch.as_tensor(rra(twin.rra_observation()), device=twin.device)
-                twin.step_subframe(actions.long())
-            obs = twin.vehicle_observation(perfect=False)
-            recorder.complete(obs, twin.interval)
-            keep = alive[:, None].expand(-1, twin.num_followers)
-            feats.append(recorder.features[keep])
-            targets.append(twin.cam_snapshot[keep])
-            stale.append((obs[..., CAM_AGE] > 0)[keep])
-            noise = command_noise_mps2 * torch.randn(
-                obs.shape[:2], generator=gen, device=twin.device
-            )
-            commands = (controller(obs) + noise).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
-            record = twin.finish_interval(commands, perfect=False)
-            alive = alive & ~record.collided.any(-1)
-            twin.begin_interval()
-    return torch.cat(feats).cpu(), torch.cat(targets).float().cpu(), torch.cat(stale).cpu()
+# ------------------------------------------------------------- moved to the trainers
+_MOVED = {
+    "collect_completion_data": "vdtn_marl.algos.completion",
+    "train_completion_predictor": "vdtn_marl.algos.completion",
+}
 
 
-def train_completion_predictor(
-    params: TwinParams | None = None,
-    seed: int = 0,
-    *,
-    batch_size: int = 128,
-    episodes: int = 1,
-    intervals: int | None = 100,
-    window: int = 6,
-    hidden: int = 64,
-    epochs: int = 30,
-    minibatch: int = 512,
-    learning_rate: float = 3e-3,
-    device: str | torch.device = "cpu",
-    trace_source=None,
-    rra_policy: Callable | None = None,
-    verbose: bool = False,
-) -> CompletionPredictor:
-    """Fit a :class:`CompletionPredictor` on impaired twin rollouts (seconds on a CPU).
-
-    Data: :func:`collect_completion_data` (``batch_size`` scenarios × ``episodes`` episodes
-    of ``params``, ``intervals`` intervals each; the leader traces of ``trace_source``,
-    default ``params.traces``: use the train part of a recorded trace set). Loss: mean squared
-    error of the predecessor's acceleration and command over the stale rows (fresh rows are
-    never completed). Adam with a cosine learning-rate schedule, ``epochs`` passes in
-    minibatches of ``minibatch``, on CPU tensors (the rollouts run on ``device``).
-    ``predictor.training_info`` reports the data size, the final training RMSE and the
-    seconds spent collecting and fitting.
-    """
-    params = params or TwinParams()
-    start = time.perf_counter()
-    torch_gen = torch.Generator().manual_seed(seed)
-    features, targets, stale = collect_completion_data(
-        params,
-        seed,
-        batch_size=batch_size,
-        episodes=episodes,
-        intervals=intervals,
-        window=window,
-        device=device,
-        trace_source=trace_source,
-        rra_policy=rra_policy,
-    )
-    collected = time.perf_counter()
-    x, y = features[stale], targets[stale]
-    if x.shape[0] < 2:
-        raise ValueError(
-            f"only {x.shape[0]} stale observations in the rollouts: nothing to learn from; "
-            "use more scenarios or longer episodes"
+def __getattr__(name: str):
+    """Training the learned predictor runs policies on the twin, so it lives with the trainers
+    (:mod:`vdtn_marl.algos.completion`); the old names say where it went."""
+    if name in _MOVED:
+        raise AttributeError(
+            f"vdtn_marl.sim.completion.{name} moved to {_MOVED[name]}.{name}; import it from there"
         )
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        predictor = CompletionPredictor(window, hidden, params.platoon.control_interval_s)
-    predictor.input_mean.copy_(x.mean(0))
-    predictor.input_std.copy_(x.std(0).clamp_min(1e-3))
-    optimiser = torch.optim.Adam(predictor.parameters(), lr=learning_rate)
-    schedule = torch.optim.lr_scheduler.CosineAnnealingLR(optimiser, T_max=max(epochs, 1))
-    n = x.shape[0]
-    threads = torch.get_num_threads()
-    # the network is tiny: one thread avoids the intra-op overhead that dominates its steps
-    torch.set_num_threads(1)
-    try:
-        for epoch in range(epochs):
-            order = torch.randperm(n, generator=torch_gen)
-            total = 0.0
-            for i in range(0, n, minibatch):
-                idx = order[i : i + minibatch]
-                loss = ((predictor(x[idx]) - y[idx]) ** 2).mean()
-                optimiser.zero_grad()
-                loss.backward()
-                optimiser.step()
-                total += float(loss.detach()) * len(idx)
-            schedule.step()
-            if verbose:
-                print(f"epoch {epoch + 1}/{epochs}: train MSE {total / n:.5f}")
-    finally:
-        torch.set_num_threads(threads)
-    predictor.eval()
-    with torch.no_grad():
-        rmse = ((predictor(x) - y) ** 2).mean(0).sqrt()
-    predictor.training_info = {
-        "stale_rows": int(n),
-        "rows": int(features.shape[0]),
-        "train_rmse_accel_mps2": float(rmse[0]),
-        "train_rmse_command_mps2": float(rmse[1]),
-        "collect_seconds": collected - start,
-        "fit_seconds": time.perf_counter() - collected,
-        "seconds": time.perf_counter() - start,
-    }
-    return predictor
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 # ---------------------------------------------------------------------------- factory

@@ -1,0 +1,107 @@
+"""Entry points of the training code, called by the CLI (``vdtn-marl train|jocc|eval``).
+
+Each takes a :class:`~vdtn_marl.config.RunConfig` (validated here) and a run directory, writes
+its outputs there atomically (``metrics.csv``, ``evaluation.csv``, ``checkpoints/``,
+``summary.json``) and returns the summary dict it wrote. ``cfg.resume`` continues an
+interrupted run from its last checkpoint. Each logs (logger ``vdtn_marl.experiment.api``) one line
+when it starts and one with its wall time and main metrics when it ends.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+
+from vdtn_marl.algos.checkpoint import load_checkpoint, untrained_policies
+from vdtn_marl.config import RunConfig, to_dict, validate
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.experiment.jocc import JointOptimisation
+from vdtn_marl.results import TABLE_METRICS
+from vdtn_marl.runs import SUMMARY_FILE, atomic_write_json, metrics_line
+
+_log = logging.getLogger(__name__)
+
+
+def _start(cfg: RunConfig, run_dir: str | Path, task: str) -> JointOptimisation:
+    loop = JointOptimisation(validate(cfg), run_dir, task=task)
+    if cfg.checkpoint and not (cfg.resume and loop.checkpoint_path.exists()):
+        loop.load_policies(load_checkpoint(cfg.checkpoint, to_dict(cfg)))
+    return loop
+
+
+def _run(cfg: RunConfig, run_dir: str | Path, task: str) -> dict:
+    """Run (or continue) ``task`` in ``run_dir``, logging its start and end."""
+    began = time.perf_counter()
+    loop = _start(cfg, run_dir, task)
+    continues = cfg.resume and loop.checkpoint_path.exists()
+    _log.info(
+        "%s seed=%d in %s: scenario=%s algo=%s control=%s rra=%s experiment=%s, "
+        "%d JOCC iteration(s) (%s)",
+        task, cfg.seed, Path(run_dir).resolve(), cfg.scenario.name, cfg.algo.name,
+        cfg.control.name, cfg.rra.name, cfg.experiment.name, cfg.experiment.jocc_iterations,
+        f"continuing from {loop.checkpoint_path}" if continues else "from the start",
+    )  # fmt: skip
+    summary = loop.run()
+    _log.info(
+        "%s done in %.1f s: %s", task, time.perf_counter() - began,
+        metrics_line(summary, TABLE_METRICS),
+    )  # fmt: skip
+    return summary
+
+
+def train(cfg: RunConfig, run_dir: str | Path) -> dict:
+    """Train one group (``cfg.task``): ``control`` trains π* on perfect observations;
+    ``control_impaired`` trains π* and then π̃ under the configured RRA policy; ``rra`` trains
+    π* (for v*) and then the RRA agents with π̃ (or the control baseline) as control module.
+    ``cfg.checkpoint`` starts from the policies of an earlier run."""
+    return _run(cfg, run_dir, cfg.task)
+
+
+def jocc(cfg: RunConfig, run_dir: str | Path) -> dict:
+    """Run ``cfg.experiment.jocc_iterations`` iterations of joint optimisation (JOCC)."""
+    return _run(cfg, run_dir, "jocc")
+
+
+def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
+    """Evaluate the policies in ``cfg.checkpoint`` on the held-out scenarios, as the
+    checkpoint's run evaluated them: a ``task=control`` checkpoint scores π* on perfect
+    observations (against CACC); any other scores the acting system, control and RRA as
+    configured (learned policies from the checkpoint, baselines by name).
+
+    The learned policies that act but were never trained are named in ``summary["warnings"]``
+    (and logged); a checkpoint none of whose acting policies was trained is refused
+    (:class:`ConfigError`)."""
+    if not cfg.checkpoint:
+        raise ConfigError("checkpoint=None: eval needs checkpoint=<path to a .pt file>")
+    began = time.perf_counter()
+    payload = load_checkpoint(cfg.checkpoint, to_dict(cfg))
+    warnings, nothing_trained = untrained_policies(payload, to_dict(cfg))
+    if nothing_trained:
+        raise ConfigError(
+            f"checkpoint={cfg.checkpoint} holds no trained policy to evaluate: "
+            + "; ".join(warnings)
+        )
+    task = payload.get("task") or "jocc"
+    _log.info(
+        "eval of %s (task=%s) in %s: %d episode(s) of %d interval(s), seed=%d",
+        cfg.checkpoint, task, Path(run_dir).resolve(), cfg.experiment.eval_episodes,
+        cfg.experiment.eval_intervals, cfg.seed,
+    )  # fmt: skip
+    for warning in warnings:
+        _log.warning(warning)
+    loop = JointOptimisation(validate(cfg), run_dir, task=task)
+    loop.load_policies(payload)
+    loop.position["iteration"] = int(payload["position"]["iteration"])
+    row = loop.evaluate()
+    summary = loop.summary(row["eval_seconds"], resumed=False)
+    summary["checkpoint"] = str(Path(cfg.checkpoint).resolve())
+    summary["checkpoint_task"] = task
+    summary["task"] = "eval"
+    summary["warnings"] = warnings
+    atomic_write_json(Path(run_dir) / SUMMARY_FILE, summary)
+    _log.info(
+        "eval done in %.1f s: %s", time.perf_counter() - began,
+        metrics_line(summary, TABLE_METRICS),
+    )  # fmt: skip
+    return summary

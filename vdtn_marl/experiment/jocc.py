@@ -1,0 +1,738 @@
+"""Joint optimisation of communication and control (JOCC), and its single-stage variants.
+
+One JOCC iteration runs four stages:
+
+1. ``control_perfect``: train π* (MAPPO, group ``vehicle``) on perfect observations (with
+   ``control.warm_start=causal_mpc``, π* first imitates the causal MPC, once, before its first
+   stage: :mod:`vdtn_marl.algos.imitation`);
+2. ``control_impaired``: train π̃ on impaired observations (CAM delay/age and the previous
+   command in its state) under the current RRA policy: uniformly random in iteration 0, the
+   learned RRA policy afterwards (or the configured RRA baseline);
+3. ``rra``: hand the VoI estimator (``td`` with π*'s critic as v*, or ``rollout``) to the RRA
+   environment, whose control module is π̃, and train the RRA agents (MAPPO, group ``rra``)
+   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``throughput``);
+4. ``evaluate``: π̃ with the RRA policy on impaired observations and π* on perfect ones, over
+   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, V2I
+   throughput per link, EVoI with its 95% CI (and the IVoI sum for comparison).
+
+``vdtn-marl train`` runs a subset of the stages (see :data:`TASK_STAGES`). Baselines slot in
+by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
+replaces the learned RRA policy (their training stages are skipped).
+
+Checkpoints (``checkpoints/last.pt``) are written every ``experiment.checkpoint_every`` PPO
+iterations and at the end of every stage; ``resume=true`` continues from the last one and,
+on the same device, reproduces an uninterrupted run bit for bit.
+
+Run ``python -m vdtn_marl.experiment.jocc`` for one JOCC iteration with the default small budgets.
+"""
+
+from __future__ import annotations
+
+import argparse
+import copy
+import logging
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from vdtn_marl import __version__
+from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
+from vdtn_marl.algos.checkpoint import (
+    CheckpointError,
+    load_checkpoint,
+    rng_state,
+    save_checkpoint,
+    set_rng_state,
+)
+from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
+from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
+from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
+from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
+from vdtn_marl.algos.value_fit import fit_value_on_acting_states
+from vdtn_marl.config import (
+    IVOI_ESTIMATORS,
+    RunConfig,
+    from_saved_dict,
+    to_dict,
+    validate,
+    validate_device,
+)
+from vdtn_marl.data.selection import preprocessing_note
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.runs import (
+    CHECKPOINT_DIR,
+    EVALUATION_FILE,
+    RAW_EVALUATION_FILE,
+    SUMMARY_FILE,
+    MetricsLog,
+    atomic_write_bytes,
+    atomic_write_json,
+    check_interrupt,
+    check_summary_file,
+    interrupt_requested,
+    logged_stage,
+    progress,
+    remove_stale_temp_files,
+    run_lock,
+    run_outputs,
+)
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.completion import make_completion
+from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
+
+STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
+STAGE_POLICIES = {
+    "control_perfect": "π*",
+    "control_impaired": "π̃",
+    "rra": "the RRA agents",
+}
+"""Who a training stage trains (for the run log)."""
+TASK_STAGES = {
+    "jocc": STAGES,
+    "control": ("control_perfect", "evaluate"),
+    "control_impaired": ("control_perfect", "control_impaired", "evaluate"),
+    "rra": ("control_perfect", "rra", "evaluate"),
+}
+#: Metrics of each JOCC iteration's evaluation in the run summary (``per_iteration``).
+PER_ITERATION_METRICS = (
+    "jocc_iteration",
+    "cam_delivery_rate",
+    "v2i_throughput_mbps_per_link",
+    "gap_error_abs_m",
+    "speed_error_abs_mps",
+    "control_cost",
+    "collision_rate",
+    "evoi",
+)
+_log = logging.getLogger(__name__)
+
+#: rra.value_fit=acting: scenarios per RRA policy whose states v* is fitted on, and the seed
+#: offset of those scenarios (apart from training's and evaluation's)
+VALUE_FIT_SCENARIOS = 32
+VALUE_FIT_SEED_OFFSET = 2_000_000_000
+
+#: Evaluation scenarios are seeded apart from every training scenario.
+EVAL_SEED_OFFSET = 1_000_000_000
+LAST_CHECKPOINT = "last.pt"
+
+
+class SwitchablePolicy:
+    """A policy slot an environment holds while the policy behind it changes (JOCC hands the
+    learned RRA policy to the control environment after iteration 0)."""
+
+    def __init__(self, policy):
+        self.policy = policy
+
+    def __call__(self, observation):
+        return self.policy(observation)
+
+    def seed(self, seed: int | None) -> None:
+        if hasattr(self.policy, "seed"):
+            self.policy.seed(seed)
+
+
+def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]:
+    """The scenario's leader traces for training and for evaluation: a named trace set
+    (:func:`~vdtn_marl.data.selection.named_sources`: a recorded one split in time) or a
+    user's file divided into a train and an eval part
+    (:func:`~vdtn_marl.data.selection.file_sources`)."""
+    from vdtn_marl.data.selection import accel_band, file_sources, named_sources
+
+    scenario = cfg.scenario
+    if scenario.trace_path is None:
+        return named_sources(scenario.traces, scenario.eval_windows)
+    platoon = cfg.twin_params().platoon
+    band = accel_band(scenario.trace_accel_clip, platoon.accel_min_mps2, platoon.accel_max_mps2)
+    return file_sources(scenario.traces, scenario.trace_path, scenario.eval_windows, band)
+
+
+class JointOptimisation:
+    """The JOCC loop (see the module doc). ``task`` picks the stages (:data:`TASK_STAGES`)."""
+
+    def __init__(self, cfg: RunConfig, run_dir: str | Path, task: str = "jocc"):
+        if task not in TASK_STAGES:
+            raise ConfigError(f"task={task!r} is not one of {', '.join(TASK_STAGES)}")
+        self.cfg = validate(cfg)
+        self.task = task
+        self.stages = TASK_STAGES[task]
+        self.run_dir = Path(run_dir)
+        self.params = cfg.twin_params()
+        self.device = torch.device(cfg.device)
+        if cfg.threads:
+            # small per-step tensors: one thread avoids oversubscription, and parallel sweep
+            # jobs on one machine do not fight over cores
+            torch.set_num_threads(cfg.threads)
+        torch.manual_seed(cfg.seed)
+        algo, control, rra = cfg.algo, cfg.control, cfg.rra
+        self.control_learned = control.name == "learned"
+        self.rra_learned = rra.learned
+        self.gamma = algo.gamma
+        self.train_traces, self.eval_traces = trace_sources(cfg)
+        note = preprocessing_note(self.train_traces, cfg.scenario.trace_path)
+        if note:
+            _log.warning(note)
+        env_kw: dict[str, Any] = dict(
+            batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
+            trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
+        )  # fmt: skip
+        cacc = CACCController(self.params.platoon)
+
+        self.pi_star = PPOTrainer(
+            VDTNTorchRLEnv("control", **env_kw), "vehicle", algo, seed=cfg.seed * 8, prior=cacc
+        )
+        first_rra = "random" if self.rra_learned else rra.name
+        self.rra_slot = SwitchablePolicy(make_rra_baseline(first_rra, self.params, cfg.seed))
+        drop = () if control.augmentation else AUGMENTATION_FEATURES
+        completion_kw = dict(
+            completion=control.completion, completion_predictor=control.completion_predictor
+        )
+        self.completion = make_completion(
+            control.completion, control.completion_predictor, self.params.platoon
+        )
+        self.pi_tilde = PPOTrainer(
+            VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **completion_kw, **env_kw),
+            "vehicle",
+            algo,
+            seed=cfg.seed * 8 + 1,
+            drop_features=drop,
+            prior=cacc,
+        )
+        # rra.value_fit=acting: the td estimator's v* is a copy of π*'s critic fitted on the
+        # acting system's states before each RRA stage (value_fit.py); π*'s own is unchanged
+        self.v_fit = copy.deepcopy(self.pi_star.critic) if rra.value_fit == "acting" else None
+        self.estimator = self.ivoi_estimator(rra.ivoi_estimator, baseline=rra.ivoi_baseline)
+        self.rra = None
+        if self.rra_learned:
+            rra_env = VDTNTorchRLEnv(
+                "rra",
+                **{**env_kw, "batch_size": algo.rra_num_envs},
+                control_module=SwitchablePolicy(self.control_policy()),
+                reward=rra.name,
+                kappa1=rra.kappa1,
+                kappa2=rra.kappa2_value,
+                ivoi_estimator=self.estimator,
+                throughput_scale=rra.throughput_scale,
+                ivoi_scale=rra.ivoi_scale,
+                miss_penalty=rra.miss_penalty,
+                burn_in_intervals=algo.rra_burn_in_intervals,
+                **completion_kw,
+            )
+            policy = rra_env.control_module.policy
+            if hasattr(policy, "bind"):  # oracle, causal_mpc: they read the twin's true state
+                rra_env.control_module.policy = policy.bind(rra_env.twin)
+            gamma, lmbda = algo.rra_subframe_discounts(self.params.platoon.subframes_per_interval)
+            bits_left = rra_env.twin.rra_layout.bits_left
+            self.rra = PPOTrainer(
+                rra_env,
+                "rra",
+                algo,
+                seed=cfg.seed * 8 + 2,
+                rollout_steps=algo.rra_rollout_steps,
+                gamma=gamma,
+                lmbda=lmbda,
+                # a link whose CAM is delivered is silent: its action has no effect
+                active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
+            )
+        self.position = {"iteration": 0, "stage": 0, "stage_start": None}
+        self.train_log = MetricsLog(self.run_dir, tensorboard=True)
+        self.eval_log = MetricsLog(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
+        self.last_evaluation: dict[str, Any] | None = None
+
+    # ------------------------------------------------------------------ policies
+    def control_policy(self):
+        """The acting control policy (π̃ or a control baseline) as obs → commands."""
+        if self.control_learned:
+            return ActorPolicy(self.pi_tilde.actor, "vehicle")
+        control = self.cfg.control
+        solver = {} if control.mpc_iterations is None else {"iterations": control.mpc_iterations}
+        return make_control_baseline(control.name, self.params, **solver)
+
+    def rra_policy(self):
+        """The current RRA policy: the learned one once trained (uniformly random before)."""
+        if self.rra_learned:
+            if self.rra.iteration == 0:
+                return make_rra_baseline("random", self.params, self.cfg.seed)
+            return ActorPolicy(self.rra.actor, "rra")
+        return make_rra_baseline(self.cfg.rra.name, self.params, self.cfg.seed)
+
+    def trainers(self) -> dict[str, PPOTrainer]:
+        out = {"pi_star": self.pi_star, "pi_tilde": self.pi_tilde}
+        if self.rra is not None:
+            out["rra"] = self.rra
+        return out
+
+    @classmethod
+    def from_checkpoint(
+        cls, path: str | Path, run_dir: str | Path, needs_pi_tilde: bool = False
+    ) -> JointOptimisation:
+        """The loop of a checkpoint's run (config from the checkpoint) with every trainer's
+        weights loaded, writing nothing next to the checkpoint (``run_dir`` is its run
+        directory; torch threads are left as the caller set them). ``needs_pi_tilde``
+        refuses a checkpoint of a run with learned control that trained no π̃."""
+        payload = load_checkpoint(path)
+        try:
+            cfg = from_saved_dict(payload["config"])
+        except (KeyError, TypeError) as err:
+            raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
+        task = payload.get("task")
+        trains_pi_tilde = task in ("jocc", "control_impaired")
+        if needs_pi_tilde and cfg.control.name == "learned" and not trains_pi_tilde:
+            raise CheckpointError(
+                f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
+                "use a checkpoint of a jocc or control_impaired run"
+            )
+        cfg.threads = 0
+        loop = cls(cfg, run_dir, task="jocc")
+        loop.load_policies(payload)
+        return loop
+
+    def ivoi_estimator(
+        self,
+        name: str,
+        rollout_intervals: int | None = None,
+        bootstrap: bool | None = None,
+        baseline: str = "optimal",
+    ):
+        """The IVoI estimator ``name`` on π*: ``td`` (π*'s critic as v*) or ``rollout`` (π*
+        for ``rollout_intervals`` intervals, then, with ``bootstrap``, its critic; defaults:
+        ``rra.rollout_intervals`` and ``rra.rollout_bootstrap``; ``baseline``: see
+        :class:`~vdtn_marl.voi.RolloutIVoIEstimator`). It reads the trainers' current
+        weights."""
+        v_star = CriticValue(self.pi_star.critic, "vehicle")
+        if name == "td":
+            if baseline != "optimal":
+                raise ConfigError(
+                    f"baseline={baseline!r} needs the rollout estimator (td compares with π*)"
+                )
+            if self.v_fit is not None:  # rra.value_fit=acting
+                return TDIVoIEstimator(CriticValue(self.v_fit, "vehicle"), self.gamma)
+            return TDIVoIEstimator(v_star, self.gamma)
+        if name == "rollout":
+            rra = self.cfg.rra
+            bootstrap = rra.rollout_bootstrap if bootstrap is None else bootstrap
+            return RolloutIVoIEstimator(
+                ActorPolicy(self.pi_star.actor, "vehicle"),
+                horizon_intervals=(
+                    rra.rollout_intervals if rollout_intervals is None else rollout_intervals
+                ),
+                discount=self.gamma,
+                terminal_value=v_star if bootstrap else None,
+                baseline=baseline,
+            )
+        raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
+
+    # ------------------------------------------------------------------ checkpoints
+    @property
+    def checkpoint_path(self) -> Path:
+        return self.run_dir / CHECKPOINT_DIR / LAST_CHECKPOINT
+
+    def save(self, path: Path | None = None) -> Path:
+        return save_checkpoint(
+            path or self.checkpoint_path,
+            {
+                "config": to_dict(self.cfg),
+                "task": self.task,
+                "position": dict(self.position),
+                "trainers": {name: t.state_dict() for name, t in self.trainers().items()},
+                "rng": rng_state(),
+                "log_rows": {"train": len(self.train_log.rows), "eval": len(self.eval_log.rows)},
+                "version": __version__,
+                **({"value_fit": self.v_fit.state_dict()} if self.v_fit is not None else {}),
+            },
+        )
+
+    def load_policies(self, payload: dict[str, Any]) -> None:
+        """Load every trainer state a checkpoint holds (policies, critics, optimisers)."""
+        for name, trainer in self.trainers().items():
+            state = payload["trainers"].get(name)
+            if state is not None:
+                try:
+                    trainer.load_state_dict(state)
+                except (RuntimeError, KeyError) as err:
+                    raise CheckpointError(
+                        f"checkpoint trainer {name!r} does not fit this config ({err})"
+                    ) from err
+        if self.v_fit is not None and "value_fit" in payload:
+            self.v_fit.load_state_dict(payload["value_fit"])
+
+    def resume(self) -> bool:
+        """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
+        if not self.checkpoint_path.exists():
+            return False
+        payload = load_checkpoint(self.checkpoint_path, to_dict(self.cfg))
+        if payload.get("task") != self.task:
+            raise CheckpointError(
+                f"checkpoint {str(self.checkpoint_path)!r} is from task={payload.get('task')!r}, "
+                f"not task={self.task!r}"
+            )
+        self.load_policies(payload)
+        self.position = dict(payload["position"])
+        set_rng_state(payload["rng"])
+        rows = payload["log_rows"]
+        check_summary_file(self.run_dir)
+        train_log = MetricsLog.resume(self.run_dir, expected_rows=rows["train"])
+        eval_log = MetricsLog.resume(
+            self.run_dir, tensorboard=False, filename=EVALUATION_FILE, expected_rows=rows["eval"]
+        )
+        remove_stale_temp_files(self.run_dir)  # of a writer killed mid-write
+        self.train_log, self.eval_log = train_log, eval_log
+        self.train_log.truncate(rows["train"])
+        self.eval_log.truncate(rows["eval"])
+        return True
+
+    # ------------------------------------------------------------------ stages
+    def _stage_budget(self, stage: str) -> tuple[PPOTrainer | None, int]:
+        e = self.cfg.experiment
+        if stage == "control_perfect":
+            return self.pi_star, e.control_iterations
+        if stage == "control_impaired":
+            return (self.pi_tilde, e.control_iterations) if self.control_learned else (None, 0)
+        if stage == "rra":
+            return (self.rra, e.rra_iterations) if self.rra_learned else (None, 0)
+        return None, 0
+
+    def total_steps(self) -> int:
+        per_iteration = sum(self._stage_budget(s)[1] for s in self.stages) + (
+            1 if "evaluate" in self.stages else 0
+        )
+        return per_iteration * self.cfg.experiment.jocc_iterations
+
+    def _train_stage(self, stage: str, bar) -> None:
+        trainer, budget = self._stage_budget(stage)
+        if trainer is None or budget == 0:
+            return
+        if stage == "control_impaired":
+            self.rra_slot.policy = self.rra_policy()
+        if self.position["stage_start"] is None:
+            if stage == "control_perfect" and trainer.iteration == 0:
+                self._warm_start_pi_star()
+            if stage == "rra" and self.v_fit is not None:
+                self._fit_value()
+            self.position["stage_start"] = trainer.iteration
+            trainer.begin_stage(budget)
+        end = self.position["stage_start"] + budget
+        every = self.cfg.experiment.checkpoint_every
+        what = f"{STAGE_POLICIES[stage]} for {end - trainer.iteration} PPO iterations"
+        with logged_stage(stage, what, self.position["iteration"]):
+            while trainer.iteration < end:
+                stats = trainer.train_iteration()
+                row = {"jocc_iteration": self.position["iteration"], "stage": stage}
+                row.update(stats.__dict__)
+                self.train_log.log(row, step=None)
+                bar.update(1)
+                bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
+                if interrupt_requested() and trainer.iteration < end:
+                    self.save()  # Ctrl-C: keep this iteration, then stop (runs.py)
+                    check_interrupt()
+                if every and trainer.iteration < end and trainer.iteration % every == 0:
+                    self.save()
+        selected = trainer.finish_stage()["best_iteration"]
+        if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
+            self.position.setdefault("selected_iterations", {})[stage] = selected
+
+    def _fit_value(self) -> None:
+        """``rra.value_fit=acting``: fit the td estimator's v* on the states the acting system
+        visits under the current RRA policy and under the greedy one (value_fit.py)."""
+        cfg = self.cfg
+        what = f"v* on the acting system's states ({cfg.rra.value_fit_horizon}-interval targets)"
+        with logged_stage("value_fit", what, self.position["iteration"]):
+            stats = fit_value_on_acting_states(
+                self.v_fit,
+                self.pi_star.critic,
+                "vehicle",
+                self.params,
+                self.control_policy(),
+                [self.rra_policy(), make_rra_baseline("greedy", self.params, cfg.seed)],
+                ActorPolicy(self.pi_star.actor, "vehicle"),
+                episodes=VALUE_FIT_SCENARIOS,
+                intervals=self.params.episode_intervals,
+                seed=VALUE_FIT_SEED_OFFSET + cfg.seed * 100 + self.position["iteration"],
+                horizon=cfg.rra.value_fit_horizon,
+                discount=self.gamma,
+                trace_source=self.train_traces,
+                device=self.device,
+                completion=self.completion,
+            )
+        _log.info("value fit: %s", stats.as_dict())
+        self.position.setdefault("value_fit", []).append(
+            {"jocc_iteration": self.position["iteration"], **stats.as_dict()}
+        )
+
+    def _warm_start_pi_star(self) -> None:
+        """``control.warm_start=causal_mpc``: π* imitates the causal MPC before its first PPO
+        stage (:func:`~vdtn_marl.algos.imitation.distill_teacher`, on the training traces)."""
+        if self.cfg.control.warm_start == "none":
+            return
+        teacher = make_control_baseline("causal_mpc", self.params)
+        intervals = min(200, self.params.episode_intervals)
+        ticks = distillation_ticks(intervals=intervals)
+        with progress(ticks, "π* imitating the causal MPC", self.cfg.progress) as bar:
+            stats = distill_teacher(
+                self.pi_star,
+                teacher,
+                self.params,
+                intervals=intervals,
+                trace_source=self.train_traces,
+                progress=lambda n: (check_interrupt(), bar.update(n)),
+            )
+        self.position["warm_start"] = {"teacher": self.cfg.control.warm_start, **asdict(stats)}
+
+    def evaluate(self) -> dict[str, Any]:
+        """The ``evaluate`` stage: metrics of the acting system, EVoI against π*."""
+        cfg = self.cfg
+        common = dict(
+            episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
+            seed=EVAL_SEED_OFFSET + cfg.seed, gamma=self.gamma, device=self.device,
+            trace_source=self.eval_traces,
+        )  # fmt: skip
+        began = time.perf_counter()
+        optimal = evaluate_system(
+            self.params, ActorPolicy(self.pi_star.actor, "vehicle"), None, perfect=True, **common
+        )
+        row: dict[str, Any] = {"jocc_iteration": self.position["iteration"]}
+        if self.stages == TASK_STAGES["control"]:
+            cacc = evaluate_system(
+                self.params, CACCController(self.params.platoon), None, perfect=True, **common
+            )
+            row.update(optimal.metrics)
+            row["cacc_control_cost"] = cacc.metrics["control_cost"]
+            self._last_results = (optimal, None)
+        else:
+            acting: EvalResult = evaluate_system(
+                self.params,
+                self.control_policy(),
+                self.rra_policy(),
+                perfect=False,
+                ivoi_estimator=self.estimator,
+                record_traces=True,
+                completion=self.completion,
+                **common,
+            )
+            evoi, low, high = expected_voi(acting.returns, optimal.returns)
+            ivoi, ivoi_low, ivoi_high = mean_ci(acting.ivoi_sums)
+            row.update(acting.metrics)
+            row.update(
+                optimal_control_cost=optimal.metrics["control_cost"],
+                evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
+                ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
+            )  # fmt: skip
+            self._last_results = (optimal, acting)
+        row["eval_seconds"] = time.perf_counter() - began
+        self.eval_log.log(row)
+        self.last_evaluation = row
+        return row
+
+    # ------------------------------------------------------------------ loop
+    def run(self) -> dict[str, Any]:
+        """Run (or continue) every iteration and stage; write and return the summary."""
+        with run_lock(self.run_dir):  # a second process in this folder is refused
+            return self._run()
+
+    def _run(self) -> dict[str, Any]:
+        cfg = self.cfg
+        resumed = cfg.resume and self.resume()
+        began = time.perf_counter()
+        done_steps = 0
+        if resumed:
+            done_steps = self._steps_before(self.position)
+        with progress(self.total_steps(), f"{self.task} seed={cfg.seed}", cfg.progress) as bar:
+            bar.update(done_steps)
+            while self.position["iteration"] < cfg.experiment.jocc_iterations:
+                stage = self.stages[self.position["stage"]]
+                if stage == "evaluate":
+                    e = cfg.experiment
+                    what = f"{e.eval_episodes} episodes of {e.eval_intervals} intervals"
+                    with logged_stage(stage, what, self.position["iteration"]):
+                        self.evaluate()
+                    bar.update(1)
+                else:
+                    self._train_stage(stage, bar)
+                self._advance()
+                self.save()
+                check_interrupt()
+        summary = self.summary(time.perf_counter() - began, resumed)
+        self.write_raw_evaluation()
+        summary["plots"] = self.write_plots()
+        atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
+        self.train_log.close()
+        return summary
+
+    def write_raw_evaluation(self) -> None:
+        """The last evaluation's arrays as ``evaluation_raw.npz``: per-scenario returns of the
+        acting system and of π*, scenario 0's |gap|/|speed| error traces [K, F] and every
+        delivered CAM's latency (ms), for plots across runs (the leaderboard's)."""
+        import io
+
+        import numpy as np
+
+        optimal, acting = getattr(self, "_last_results", (None, None))
+        if acting is None:
+            return
+        arrays = {
+            "interval_s": np.float64(self.params.platoon.control_interval_s),
+            "returns": acting.returns.numpy(),
+            "optimal_returns": optimal.returns.numpy(),
+            **{key: value.numpy() for key, value in acting.traces.items()},
+        }
+        if acting.cam_latency_ms is not None:
+            arrays["cam_latency_ms"] = acting.cam_latency_ms.numpy()
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, **arrays)
+        atomic_write_bytes(self.run_dir / RAW_EVALUATION_FILE, buffer.getvalue())
+
+    def write_plots(self) -> list[str]:
+        """Training curves, and error traces and CAM latency CDF of the last evaluation."""
+        from vdtn_marl import results
+
+        written = []
+        if self.train_log.rows:
+            written.append(
+                results.plot_training_curves(
+                    self.train_log.path, self.run_dir / results.TRAINING_CURVES_FILE
+                )
+            )
+        acting = getattr(self, "_last_results", (None, None))[1]
+        if acting is not None:
+            pp = self.params.platoon
+            written.append(
+                results.plot_error_traces(
+                    acting.traces["gap_error_abs_m"],
+                    acting.traces["speed_error_abs_mps"],
+                    pp.control_interval_s,
+                    self.run_dir / results.ERROR_TRACES_FILE,
+                )
+            )
+            label = f"{self.cfg.rra.name} RRA, {self.cfg.control.name} control"
+            written.append(
+                results.plot_latency_cdf(
+                    {label: acting.cam_latency_ms},
+                    pp.control_interval_s * 1000.0,
+                    self.run_dir / results.LATENCY_CDF_FILE,
+                )
+            )
+        return [str(p) for p in written]
+
+    def _advance(self) -> None:
+        self.position["stage"] += 1
+        self.position["stage_start"] = None
+        if self.position["stage"] == len(self.stages):
+            self.position["stage"] = 0
+            self.position["iteration"] += 1
+
+    def _steps_before(self, position: dict[str, Any]) -> int:
+        per_stage = [
+            self._stage_budget(s)[1] if s != "evaluate" else 1 for s in self.stages
+        ]  # fmt: skip
+        steps = position["iteration"] * sum(per_stage) + sum(per_stage[: position["stage"]])
+        if position["stage_start"] is not None:
+            trainer, _ = self._stage_budget(self.stages[position["stage"]])
+            steps += trainer.iteration - position["stage_start"]
+        return steps
+
+    def summary(self, seconds: float, resumed: bool) -> dict[str, Any]:
+        evaluation = dict(self.last_evaluation or {})
+        if not evaluation and self.eval_log.rows:
+            evaluation = dict(self.eval_log.rows[-1])
+        return {
+            "vdtn_marl_version": __version__,
+            "task": self.task,
+            "seed": self.cfg.seed,
+            # the RRA reward weights, where this task trains RRA agents
+            **(
+                {"kappa1": self.cfg.rra.kappa1, "kappa2": self.cfg.rra.kappa2_value}
+                if "rra" in self.stages
+                else {}
+            ),
+            "rra": self.cfg.rra.name,
+            "control": self.cfg.control.name,
+            "scenario": self.cfg.scenario.name,
+            "traces": self.cfg.scenario.traces,
+            "trace_path": self.cfg.scenario.trace_path,
+            # what pre-processing changed in a trace file (samples clipped, accelerations)
+            "trace_preprocessing": getattr(self.train_traces, "preprocessing", None),
+            "iterations": self.position["iteration"],
+            "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
+            # with algo.validate_every: the trainer iteration whose weights each stage kept
+            "selected_iterations": dict(self.position.get("selected_iterations", {})),
+            "warm_start": self.position.get("warm_start"),
+            # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
+            "value_fit": self.position.get("value_fit"),
+            "seconds": seconds,
+            "resumed": resumed,
+            **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
+            # the evaluation after each JOCC iteration: does the loop improve across them?
+            "per_iteration": [
+                {k: row.get(k) for k in PER_ITERATION_METRICS if k in row}
+                for row in self.eval_log.rows
+            ],
+            "config": self._summary_config(),
+        }
+
+    def _summary_config(self) -> dict[str, Any]:
+        """The run's config for its summary: ``task`` (a key of ``vdtn-marl train``, which
+        picks one stage) only where the run is one stage; a jocc run's task is the summary's."""
+        config = to_dict(self.cfg)
+        if self.task == "jocc":
+            config.pop("task", None)
+        return config
+
+
+def format_table(row: dict[str, Any]) -> str:
+    """A plain two-column table of an evaluation row (units are in the metric names)."""
+    width = max(len(k) for k in row)
+    lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
+    for key, value in row.items():
+        if key == "config" or isinstance(value, dict):
+            continue
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        lines.append(f"{key:<{width}}  {text}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m vdtn_marl.experiment.jocc",
+        description="One JOCC iteration with the default small budgets; prints the metrics.",
+    )
+    parser.add_argument(
+        "--run-dir",
+        default="runs/jocc",
+        help="output directory; one that already holds a run is refused unless --resume",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--kappa1", type=float, default=0.5)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"
+    )
+    args = parser.parse_args(argv)
+    cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
+    cfg.rra.kappa1 = args.kappa1
+    try:
+        validate(cfg)
+        validate_device(cfg.device)
+    except ConfigError as exc:
+        parser.error(str(exc))
+    found = run_outputs(args.run_dir)
+    if found and not args.resume:
+        # training afresh would overwrite its checkpoints and metrics (as the CLI refuses to)
+        print(
+            f"error: --run-dir={args.run_dir} already holds a run ({', '.join(found)}); "
+            "allowed: --resume to continue it, or another --run-dir",
+            file=sys.stderr,
+        )
+        return 2
+    summary = JointOptimisation(cfg, args.run_dir).run()
+    print(format_table(summary))
+    print(f"outputs: {Path(args.run_dir).resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
