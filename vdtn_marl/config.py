@@ -21,6 +21,7 @@ from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
+from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
 ALGOS = ("mappo", "ippo")
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
@@ -28,7 +29,7 @@ RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations
 LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
 RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
-IVOI_ESTIMATORS = ("td", "rollout")
+IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi.py)
 VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")

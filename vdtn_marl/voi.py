@@ -10,16 +10,24 @@ An estimator is any callable ``estimator(twin, record) -> Tensor[B, F]`` called 
 interval, right after the twin integrated it (``record`` is the
 :class:`~vdtn_marl.sim.twin.IntervalRecord`). The environments add κ2·ξ_i to the reward of
 ``rra_i`` at the last subframe of the interval.
+
+The named estimators are :data:`IVOI_ESTIMATORS` (``rra.ivoi_estimator=<name>``), each built
+from the :class:`VoIReference` it measures against (π*'s policy, its value v*, the discount)
+by its ``from_reference``. A new estimator is its class with ``from_reference``, one line in
+the registry, and nothing else: the config's choices, the environments and the JOCC loop read
+the registry.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Protocol
+from dataclasses import dataclass
+from typing import Any, Protocol
 
 import numpy as np
 import torch
 
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.backend import as_float, repeat_rows, to_numpy, to_torch, xp
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.platoon import (
@@ -346,6 +354,18 @@ class RolloutValue:
 IVOI_BASELINES = ("optimal", "cam_lost")
 
 
+@dataclass(frozen=True)
+class VoIReference:
+    """What an IVoI estimator measures against: the reference policy π* (perfect observations
+    [.., F, 8] → commands [.., F]; ``None``: the linear CACC), its value v* (observations →
+    [.., F], or an object with ``state_value``; ``None``: none available) and the discount γ
+    per control interval."""
+
+    policy: Policy | None = None
+    value: Any = None
+    discount: float = 0.99
+
+
 class RolloutIVoIEstimator:
     """Counterfactual Monte-Carlo rollouts in the twin (the reference estimator).
 
@@ -385,6 +405,20 @@ class RolloutIVoIEstimator:
         self.discount = discount
         self.terminal_value = terminal_value
         self.baseline = baseline
+
+    @classmethod
+    def from_reference(
+        cls,
+        reference: VoIReference,
+        *,
+        horizon_intervals: int = 10,
+        bootstrap: bool = True,
+        baseline: str = "optimal",
+    ) -> RolloutIVoIEstimator:
+        """Rollouts of ``reference.policy`` for ``horizon_intervals``; with ``bootstrap`` (and
+        a ``reference.value``) v* values the state each branch ends in."""
+        terminal = reference.value if bootstrap else None
+        return cls(reference.policy, horizon_intervals, reference.discount, terminal, baseline)
 
     @property
     def needs_command_if_lost(self) -> bool:
@@ -515,6 +549,20 @@ class TDIVoIEstimator:
         self.value = value
         self.discount = discount
 
+    @classmethod
+    def from_reference(
+        cls, reference: VoIReference, *, baseline: str = "optimal", **_: Any
+    ) -> TDIVoIEstimator:
+        """The TD error of ``reference.value`` (required); the rollout options do not apply,
+        and ξ can only compare with π* (``baseline="optimal"``)."""
+        if reference.value is None:
+            raise ValueError("ivoi_estimator='td' needs value=<critic of the optimal policy>")
+        if baseline != "optimal":
+            raise ConfigError(
+                f"baseline={baseline!r} needs the rollout estimator (td compares with π*)"
+            )
+        return cls(reference.value, reference.discount)
+
     def __call__(self, twin: DigitalTwin, record: IntervalRecord) -> torch.Tensor:
         pp = twin.params.platoon
         if hasattr(self.value, "state_value"):  # e.g. RolloutValue: needs the twin's trace
@@ -561,20 +609,40 @@ def close_interval(
     return twin.finish_interval(commands, perfect, command_if_lost_mps2=command_if_lost)
 
 
-def make_ivoi_estimator(spec: str | IVoIEstimator | None, **kwargs) -> IVoIEstimator:
-    """``"rollout"``, ``"td"`` (needs ``value=``), ``"none"`` or an estimator object."""
+#: The named IVoI estimators, name → class with ``from_reference(reference, **options)``.
+IVOI_ESTIMATORS: dict[str, type] = {
+    "td": TDIVoIEstimator,
+    "rollout": RolloutIVoIEstimator,
+}
+
+
+def make_ivoi_estimator(
+    spec: str | IVoIEstimator | None, reference: VoIReference | None = None, **options
+) -> IVoIEstimator:
+    """A name of :data:`IVOI_ESTIMATORS` built on ``reference`` with ``options``, ``"none"``
+    (ξ = 0) or an estimator object. Without ``reference`` one is made of the options
+    ``reference_policy``, ``value``, ``terminal_value`` and ``discount`` (the constructors'
+    keywords), so ``make_ivoi_estimator("td", value=critic)`` and
+    ``make_ivoi_estimator("rollout", horizon_intervals=5)`` work as before."""
     if spec is None or spec == "none":
         return ZeroIVoIEstimator()
-    if spec == "rollout":
-        return RolloutIVoIEstimator(**kwargs)
-    if spec == "td":
-        if "value" not in kwargs:
-            raise ValueError("ivoi_estimator='td' needs value=<critic of the optimal policy>")
-        return TDIVoIEstimator(**kwargs)
     if isinstance(spec, str):
-        raise ValueError(
-            f"ivoi_estimator={spec!r} is not one of 'rollout', 'td', 'none' (or an object)"
-        )
+        if spec not in IVOI_ESTIMATORS:
+            raise ValueError(
+                f"ivoi_estimator={spec!r} is not one of "
+                f"{', '.join(repr(k) for k in (*IVOI_ESTIMATORS, 'none'))} (or an object)"
+            )
+        if reference is None:
+            value = options.pop("value", None)
+            terminal = options.pop("terminal_value", None)
+            reference = VoIReference(
+                policy=options.pop("reference_policy", None),
+                value=value if value is not None else terminal,
+                discount=options.pop("discount", 0.99),
+            )
+            if spec == "rollout":  # the constructor's default: no bootstrap without a value
+                options.setdefault("bootstrap", terminal is not None)
+        return IVOI_ESTIMATORS[spec].from_reference(reference, **options)
     if not callable(spec):
         raise TypeError(f"ivoi_estimator={spec!r} must be callable as estimator(twin, record)")
     return spec

@@ -54,7 +54,6 @@ from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
 from vdtn_marl.config import (
-    IVOI_ESTIMATORS,
     RunConfig,
     from_saved_dict,
     to_dict,
@@ -84,7 +83,7 @@ from vdtn_marl.runs import (
 )
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import RolloutIVoIEstimator, TDIVoIEstimator, expected_voi, mean_ci
+from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, expected_voi, mean_ci
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
 STAGE_POLICIES = {
@@ -304,28 +303,25 @@ class JointOptimisation:
         ``rra.rollout_intervals`` and ``rra.rollout_bootstrap``; ``baseline``: see
         :class:`~vdtn_marl.voi.RolloutIVoIEstimator`). It reads the trainers' current
         weights."""
-        v_star = CriticValue(self.pi_star.critic, "vehicle")
-        if name == "td":
-            if baseline != "optimal":
-                raise ConfigError(
-                    f"baseline={baseline!r} needs the rollout estimator (td compares with π*)"
-                )
-            if self.v_fit is not None:  # rra.value_fit=acting
-                return TDIVoIEstimator(CriticValue(self.v_fit, "vehicle"), self.gamma)
-            return TDIVoIEstimator(v_star, self.gamma)
-        if name == "rollout":
-            rra = self.cfg.rra
-            bootstrap = rra.rollout_bootstrap if bootstrap is None else bootstrap
-            return RolloutIVoIEstimator(
-                ActorPolicy(self.pi_star.actor, "vehicle"),
-                horizon_intervals=(
-                    rra.rollout_intervals if rollout_intervals is None else rollout_intervals
-                ),
-                discount=self.gamma,
-                terminal_value=v_star if bootstrap else None,
-                baseline=baseline,
-            )
-        raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
+        if name not in IVOI_ESTIMATORS:
+            raise ConfigError(f"ivoi_estimator={name!r} is not one of {', '.join(IVOI_ESTIMATORS)}")
+        rra = self.cfg.rra
+        critic = self.pi_star.critic
+        if name == "td" and self.v_fit is not None:  # rra.value_fit=acting: td reads the fit
+            critic = self.v_fit
+        reference = VoIReference(
+            policy=ActorPolicy(self.pi_star.actor, "vehicle"),
+            value=CriticValue(critic, "vehicle"),
+            discount=self.gamma,
+        )
+        options = {
+            "horizon_intervals": (
+                rra.rollout_intervals if rollout_intervals is None else rollout_intervals
+            ),
+            "bootstrap": rra.rollout_bootstrap if bootstrap is None else bootstrap,
+            "baseline": baseline,
+        }
+        return IVOI_ESTIMATORS[name].from_reference(reference, **options)
 
     # ------------------------------------------------------------------ checkpoints
     @property
