@@ -696,6 +696,15 @@ def test_smoke_resume_skips_finished_cells(smoke):
     result = leaderboard.run_benchmark(cfg, command="test")
     assert not result.ran
     assert len(result.done) == 12 and not result.failed and not result.pending
+    # run=false: nothing runs, the missing cell stays missing, the report is written
+    redo.unlink()
+    cfg.run = False
+    result = leaderboard.run_benchmark(cfg, command="test")
+    assert not result.ran and [c.name for c in result.pending] == ["platoon4/greedy/seed1"]
+    assert not redo.exists() and result.report is not None
+    cfg.run = True
+    result = leaderboard.run_benchmark(cfg, command="test")
+    assert [c.name for c in result.ran] == ["platoon4/greedy/seed1"]
     for path, mtime in before.items():
         if path != redo:
             assert path.stat().st_mtime_ns == mtime, path

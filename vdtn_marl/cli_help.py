@@ -297,6 +297,8 @@ def bench_help() -> str:
         f"  out_dir=DIR        the cells' run directories [default: {_bench_default('out_dir')}]",
         "  report_dir=DIR     where the report goes [default: out_dir]",
         "  shard=K num_shards=N   this job runs cells K, K+N, ... (for -m sweeps) [0, 1]",
+        "  cells=[GLOB,...]   run only the cells <scenario>/<method>/seed<k> that match [all]",
+        "  run=false          run no cell, only report the complete ones",
         "  report=false       run the cells only",
         "  device=cpu|cuda    device of every run [default: cpu]",
         "",

@@ -455,6 +455,7 @@ class BenchConfig:
     (``-m bench shard=0,1 num_shards=2 hydra/launcher=joblib``). ``cells`` (glob patterns over
     ``<scenario>/<method>/seed<k>``, e.g. ``[platoon4/greedy/*]``; empty: all) runs only the
     matching cells, shards splitting those; the report still covers every complete cell.
+    ``run=false`` runs no cell and only writes the report of the complete ones.
     """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
@@ -463,6 +464,7 @@ class BenchConfig:
     shard: int = 0
     num_shards: int = 1
     cells: list[str] = field(default_factory=list)
+    run: bool = True  # false: run no cell, only write the report of the complete ones
     report: bool = True  # write the report once every cell is complete
     device: str = "cpu"
     progress: bool = True

@@ -79,6 +79,9 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
                     done.append(cell)
                     bar.update(1)
                     continue
+                if not cfg.run:  # report only: a missing cell stays missing
+                    bar.update(1)
+                    continue
                 try:
                     run_cell(cell, data, run_cfg, out_dir)
                 except Exception as exc:  # one failing cell does not stop the grid
