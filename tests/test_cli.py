@@ -24,9 +24,11 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli, cli_help, cli_prepass, config
+from vdtn_marl import cli, config
+from vdtn_marl.cli import help as cli_help
+from vdtn_marl.cli import prepass as cli_prepass
 
-# Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli.py).
+# Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli/app.py).
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -305,8 +307,8 @@ def test_unknown_command_is_usage_error(tmp_path):
 
 
 def _prevalidate(command: str, overrides: list[str]) -> None:
-    hargs = cli._hydra_args(overrides)
-    cli.prevalidate(command, hargs, [*hargs.overrides, f"hydra.job.name={command}"])
+    hargs = cli.app._hydra_args(overrides)
+    cli.app.prevalidate(command, hargs, [*hargs.overrides, f"hydra.job.name={command}"])
 
 
 @pytest.mark.parametrize("group", ["scenario", "algo", "control", "rra", "experiment"])

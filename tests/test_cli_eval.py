@@ -18,7 +18,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli, cli_help, cli_prepass
+from vdtn_marl import cli
+from vdtn_marl.cli import help as cli_help
+from vdtn_marl.cli import prepass as cli_prepass
 
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
 
@@ -108,7 +110,7 @@ def test_eval_takes_the_run_config_and_the_command_line_on_top(tmp_path, monkeyp
 def test_eval_overrides_recompose_the_run_config_exactly(overrides, tmp_path):
     run = tmp_path / "run"
     data = _make_run(run, overrides, trained=TRAINED)
-    composed = _compose(cli.eval_overrides([f"checkpoint={run}"]))
+    composed = _compose(cli_prepass.eval_overrides([f"checkpoint={run}"]))
     for key in cli_help.EVAL_FRESH_KEYS:
         data.pop(key), composed.pop(key)
     assert composed == data

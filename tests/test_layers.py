@@ -48,6 +48,9 @@ KNOWN_UPWARD: set[tuple[str, str]] = set()
 MOVED = {
     "vdtn_marl.algos.jocc": "vdtn_marl.experiment.jocc",
     "vdtn_marl.algos.api": "vdtn_marl.experiment.api",
+    "vdtn_marl.cli_help": "vdtn_marl.cli.help",
+    "vdtn_marl.cli_prepass": "vdtn_marl.cli.prepass",
+    "vdtn_marl.cli_errors": "vdtn_marl.cli.errors",
 }
 
 

@@ -16,7 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdtn_marl import cli, cli_help, config, leaderboard
+from vdtn_marl import cli, config, leaderboard
+from vdtn_marl.cli import help as cli_help
 from vdtn_marl.config import ConfigError
 from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.runs import RAW_EVALUATION_FILE

@@ -1,11 +1,14 @@
-"""Errors of the ``vdtn-marl`` command line: :class:`CLIError`, printed as one line (exit code
-2). The one-line messages themselves come from :func:`vdtn_marl.experiment.compose.translate`
-(exported here too), which the leaderboard shares."""
+"""Moved to :mod:`vdtn_marl.cli.errors`; importing it from here still works for one release
+(it is the same module) and warns."""
 
-from vdtn_marl.experiment.compose import translate
+import sys
+import warnings
 
-__all__ = ["CLIError", "translate"]
+from vdtn_marl.cli import errors as _moved
 
-
-class CLIError(Exception):
-    """A bad command line or config: printed as one ``error: ...`` line, exit code 2."""
+warnings.warn(
+    "vdtn_marl.cli_errors moved to vdtn_marl.cli.errors; import it from there",
+    DeprecationWarning,
+    stacklevel=2,
+)
+sys.modules[__name__] = _moved

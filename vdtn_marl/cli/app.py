@@ -11,14 +11,14 @@ How a Hydra command runs:
 
 1. The command word is taken out of the arguments; Hydra's own argument parser reads the rest.
 2. ``eval checkpoint=RUN``: the overrides that recompose the config of the checkpoint's run
-   go before the user's (:func:`vdtn_marl.cli_prepass.eval_overrides`), so eval uses the
+   go before the user's (:func:`vdtn_marl.cli.prepass.eval_overrides`), so eval uses the
    run's config and the command line changes it.
-3. Pre-pass (:mod:`vdtn_marl.cli_prepass`): every job's config is composed with Hydra's
+3. Pre-pass (:mod:`vdtn_marl.cli.prepass`): every job's config is composed with Hydra's
    compose API (for ``-m``, one per combination of the sweep, expanded as Hydra's basic
    sweeper does), converted to a :class:`RunConfig`, and checked by
    :func:`vdtn_marl.config.validate` and :func:`vdtn_marl.config.validate_device`; the job's
    folder must not hold a run unless ``resume=true`` continues it. A bad config prints one
-   line, ``error: KEY=VALUE ... allowed ...`` (:mod:`vdtn_marl.cli_errors`), and exits with
+   line, ``error: KEY=VALUE ... allowed ...`` (:mod:`vdtn_marl.cli.errors`), and exits with
    code 2 before anything is written.
 4. Then the real ``@hydra.main`` app runs with the same arguments (so ``-m``, launchers,
    ``--cfg``, ``--info`` behave as in any Hydra app). Each job writes ``config.yaml`` (the
@@ -46,15 +46,15 @@ from typing import Any
 from hydra.experimental.callback import Callback
 
 from vdtn_marl import __version__
-from vdtn_marl.cli_errors import CLIError
-from vdtn_marl.cli_help import (
+from vdtn_marl.cli.errors import CLIError
+from vdtn_marl.cli.help import (
     COMMANDS,
     CONFIG_PACKAGE,
     PROG,
     command_help,
     top_help,
 )
-from vdtn_marl.cli_prepass import (
+from vdtn_marl.cli.prepass import (
     HYDRA_COMMANDS,
     SCHEMA_WARNING,
     eval_overrides,
@@ -529,11 +529,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     return _cmd_hydra(command, rest)
 
 
-if __name__ == "__main__":
-    raise SystemExit(main())
-
-
 def bench_main(argv: Sequence[str] | None = None) -> int:
     """``vdtn-marl bench ARGS`` (for ``python -m vdtn_marl.leaderboard`` and
     ``benchmarks/leaderboard.py``)."""
     return main(["bench", *(sys.argv[1:] if argv is None else argv)])
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
