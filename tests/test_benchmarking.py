@@ -105,3 +105,32 @@ def test_delivery_vs_speed_shows_the_breakpoint_cliff(tmp_path):
     assert below["v2v_pathloss_db"] - above["v2v_pathloss_db"] > 15.0
     assert above["cam_delivery_rate"] == 1.0
     assert below["cam_delivery_rate"] < 0.9
+
+
+def test_jocc_iterations_reads_each_cells_evaluation_rows(tmp_path):
+    """Two seeds × 2 JOCC iterations of one method: means per iteration and the paired
+    last − first change, by hand."""
+    spec = importlib.util.spec_from_file_location(
+        "jocc_iterations", Path(__file__).resolve().parents[1] / "benchmarks/jocc_iterations.py"
+    )
+    script = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(script)
+    keys = [m for m, _ in script.METRICS]
+    for seed, rows in {0: [0.1, 0.3], 1: [0.2, 0.6]}.items():
+        cell = tmp_path / "platoon4" / "m" / f"seed{seed}"
+        cell.mkdir(parents=True)
+        (cell / "summary.json").write_text("{}")
+        lines = [",".join(["jocc_iteration", *keys])]
+        lines += [",".join([str(k), *[str(v)] * len(keys)]) for k, v in enumerate(rows)]
+        (cell / "evaluation.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "platoon4" / "m" / "seed2").mkdir()  # not complete: ignored
+    out = tmp_path / "out.json"
+    assert script.main([str(tmp_path), "--methods", "m", "--output", str(out)]) == 0
+    result = json.loads(out.read_text())["methods"]["m"]
+    assert result["seeds"] == [0, 1]
+    first, last = (it["cam_delivery_rate"]["mean"] for it in result["iterations"])
+    assert math.isclose(first, 0.15, rel_tol=1e-6) and math.isclose(last, 0.45, rel_tol=1e-6)
+    change = result["last_minus_first"]["gap_error_abs_m"]
+    assert math.isclose(change["mean"], 0.3, rel_tol=1e-6) and change["n"] == 2
+    with pytest.raises(SystemExit, match="--methods 'x' must list some of m"):
+        script.main([str(tmp_path), "--methods", "x", "--output", str(out)])
