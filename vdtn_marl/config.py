@@ -17,13 +17,14 @@ from typing import Any
 
 from vdtn_marl.algos.params import AlgoConfig
 from vdtn_marl.algos.rra_baselines import RRA_BASELINES
+from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
 from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
-ALGOS = ("mappo", "ippo")
+ALGOS = tuple(ALGORITHMS)  # algo.name (vdtn_marl/algos/trainer.py)
 CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
 RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations

@@ -2,6 +2,7 @@
 
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import pytest
 import torch
@@ -11,6 +12,7 @@ from vdtn_marl.algos.checkpoint import CheckpointError, load_checkpoint
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.networks import scalers
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
+from vdtn_marl.algos.trainer import ALGORITHMS, Trainer, trainer_class
 from vdtn_marl.config import (
     AlgoConfig,
     ControlConfig,
@@ -19,6 +21,7 @@ from vdtn_marl.config import (
     RunConfig,
     ScenarioConfig,
     to_dict,
+    validate,
 )
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.experiment.jocc import JointOptimisation
@@ -495,3 +498,28 @@ def test_a_saved_config_without_newer_keys_keeps_the_behaviour_it_was_run_with()
         assert getattr(getattr(old, group), key) == value, key
     assert old.algo.rra_credit != RunConfig().algo.rra_credit  # not today's default
     assert from_saved_dict(to_dict(RunConfig())) == RunConfig()  # present keys are kept
+
+
+@pytest.mark.parametrize("name", sorted(ALGORITHMS))
+def test_every_registered_algorithm_trains_through_the_trainer_protocol(name):
+    """Each entry of the registry: a trainer with the members the JOCC loop uses, whose
+    iteration updates the policy and reports finite losses; its YAML selects it and the config
+    accepts the name."""
+    import yaml
+
+    cls = trainer_class(name)
+    env = VDTNTorchRLEnv("control", batch_size=4, seed=0, episode_intervals=20)
+    trainer = cls(env, "vehicle", replace(TINY_ALGO, name=name, rollout_steps=10), seed=2)
+    assert isinstance(trainer, Trainer)
+    before = [p.detach().clone() for p in trainer.actor.parameters()]
+    trainer.begin_stage(1)
+    stats = trainer.train_iteration()
+    trainer.finish_stage()
+    assert trainer.iteration == 1 and math.isfinite(stats.loss_objective)
+    after = list(trainer.actor.parameters())
+    assert any(not torch.equal(a, b) for a, b in zip(before, after, strict=True))
+    conf = Path(__file__).resolve().parents[2] / "conf" / "algo" / f"{name}.yaml"
+    assert yaml.safe_load(conf.read_text())["name"] == name
+    validate(replace(RunConfig(), algo=replace(RunConfig().algo, name=name)))
+    with pytest.raises(ConfigError, match="algo.name='nope'"):
+        trainer_class("nope")

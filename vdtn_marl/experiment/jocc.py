@@ -51,7 +51,8 @@ from vdtn_marl.algos.checkpoint import (
 from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
-from vdtn_marl.algos.ppo import ActorPolicy, CriticValue, PPOTrainer
+from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
+from vdtn_marl.algos.trainer import Trainer, trainer_class
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
 from vdtn_marl.config import (
     RunConfig,
@@ -181,8 +182,9 @@ class JointOptimisation:
             trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
         )  # fmt: skip
         cacc = CACCController(self.params.platoon)
+        make_trainer = trainer_class(algo.name)  # vdtn_marl/algos/trainer.py: ALGORITHMS
 
-        self.pi_star = PPOTrainer(
+        self.pi_star = make_trainer(
             VDTNTorchRLEnv("control", **env_kw), "vehicle", algo, seed=cfg.seed * 8, prior=cacc
         )
         first_rra = "random" if self.rra_learned else rra.name
@@ -194,7 +196,7 @@ class JointOptimisation:
         self.completion = make_completion(
             control.completion, control.completion_predictor, self.params.platoon
         )
-        self.pi_tilde = PPOTrainer(
+        self.pi_tilde = make_trainer(
             VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **completion_kw, **env_kw),
             "vehicle",
             algo,
@@ -227,7 +229,7 @@ class JointOptimisation:
                 rra_env.control_module.policy = policy.bind(rra_env.twin)
             gamma, lmbda = algo.rra_subframe_discounts(self.params.platoon.subframes_per_interval)
             bits_left = rra_env.twin.rra_layout.bits_left
-            self.rra = PPOTrainer(
+            self.rra = make_trainer(
                 rra_env,
                 "rra",
                 algo,
@@ -260,7 +262,7 @@ class JointOptimisation:
             return ActorPolicy(self.rra.actor, "rra")
         return make_rra_baseline(self.cfg.rra.name, self.params, self.cfg.seed)
 
-    def trainers(self) -> dict[str, PPOTrainer]:
+    def trainers(self) -> dict[str, Trainer]:
         out = {"pi_star": self.pi_star, "pi_tilde": self.pi_tilde}
         if self.rra is not None:
             out["rra"] = self.rra
@@ -383,7 +385,7 @@ class JointOptimisation:
         return True
 
     # ------------------------------------------------------------------ stages
-    def _stage_budget(self, stage: str) -> tuple[PPOTrainer | None, int]:
+    def _stage_budget(self, stage: str) -> tuple[Trainer | None, int]:
         e = self.cfg.experiment
         if stage == "control_perfect":
             return self.pi_star, e.control_iterations
