@@ -333,7 +333,7 @@ def test_group_options_as_documented():
     assert {"jocc", "drra", "throughput", "random", "round_robin", "greedy"} <= set(
         config.RRA_METHODS
     )
-    assert set(cli_help.group_options("control")) == {"learned", "cacc", "oracle", "causal_mpc"}
+    assert set(cli_help.group_options("control")) == set(config.CONTROLS)
     assert set(cli_help.group_options("experiment")) == {"smoke", "default", "paper"}
     launchers = set(cli_help.group_options("hydra/launcher"))
     assert {"basic", "joblib", "submitit_slurm", "ray"} <= launchers

@@ -15,6 +15,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
+from vdtn_marl.algos.control_baselines import CONTROL_BASELINES
 from vdtn_marl.algos.params import AlgoConfig
 from vdtn_marl.algos.rra_baselines import RRA_BASELINES
 from vdtn_marl.algos.trainer import ALGORITHMS
@@ -25,9 +26,10 @@ from vdtn_marl.voi import IVOI_BASELINES
 from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
 ALGOS = tuple(ALGORITHMS)  # algo.name (vdtn_marl/algos/trainer.py)
-CONTROLS = ("learned", "cacc", "oracle", "causal_mpc")
+# control.name: a learned policy or a baseline of the registry that may drive a run
+CONTROLS = ("learned", *(n for n, b in CONTROL_BASELINES.items() if b.in_runs))
 RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
-MPC_CONTROLS = ("oracle", "causal_mpc")  # the controls that take control.mpc_iterations
+MPC_CONTROLS = tuple(n for n, b in CONTROL_BASELINES.items() if b.solver_steps)  # mpc_iterations
 LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
 RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
 IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi.py)

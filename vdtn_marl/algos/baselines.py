@@ -37,6 +37,7 @@ Action encoding: see :mod:`vdtn_marl.algos.rra_baselines`.
 
 from __future__ import annotations
 
+from vdtn_marl.algos.control_baselines import CONTROL_BASELINES
 from vdtn_marl.algos.exact_oracle import (
     ExactOracleController,
 )
@@ -53,7 +54,6 @@ from vdtn_marl.algos.rra_baselines import (
     encode_rra_action,
     max_power_level,
 )
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import PlatoonParams, TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 
@@ -72,14 +72,6 @@ __all__ = [
     "make_rra_baseline",
     "max_power_level",
 ]
-
-
-CONTROL_BASELINES: dict[str, type] = {
-    "cacc": CACCController,
-    "oracle": OracleController,
-    "causal_mpc": OracleController,  # preview_intervals=0
-    "exact_oracle": ExactOracleController,  # perfect observation only
-}
 
 
 def _twin_params(twin_or_params) -> tuple[TwinParams, DigitalTwin | None]:
@@ -131,20 +123,12 @@ def make_control_baseline(
             f"control baseline {name!r} is not one of "
             f"{', '.join(repr(k) for k in CONTROL_BASELINES)}"
         )
-    twin = params if isinstance(params, DigitalTwin) else None
-    if name == "cacc":
-        if isinstance(params, PlatoonParams):
-            platoon = params
-        else:
-            platoon = _twin_params(params)[0].platoon
-        return CACCController(platoon, **kwargs)
     if params is not None and not isinstance(params, DigitalTwin | TwinParams | PlatoonParams):
         raise TypeError(
             f"expected a DigitalTwin, TwinParams or PlatoonParams, got {type(params).__name__}"
         )
-    if name == "causal_mpc":
-        kwargs.setdefault("preview_intervals", 0)
-        kwargs.setdefault("iterations", CAUSAL_MPC_ITERATIONS)
-    make = ExactOracleController if name == "exact_oracle" else OracleController
-    oracle = make(**kwargs)
-    return oracle.bind(twin) if twin is not None else oracle
+    twin = params if isinstance(params, DigitalTwin) else None
+    platoon = params if isinstance(params, PlatoonParams) else _twin_params(params)[0].platoon
+    entry = CONTROL_BASELINES[name]
+    controller = entry.build(platoon, **kwargs)
+    return controller.bind(twin) if entry.needs_twin and twin is not None else controller
