@@ -32,3 +32,23 @@ def test_readme_quotes_the_headline_cam_delivery_as_generated():
     jocc = 100 * stats[HEADLINE["target"]["method"]]["cam_delivery_rate"]["mean"]
     drra = 100 * stats[HEADLINE["target"]["reference"]]["cam_delivery_rate"]["mean"]
     assert f"({jocc:.1f} % delivered, DRRA {drra:.1f} %)" in _one_line(README)
+
+
+def _gap(name: str) -> dict:
+    data = json.loads((ROOT / "benchmarks/results" / name).read_text())
+    return data["pi_star_causal_mpc_gap_to_oracle_percent"]
+
+
+def test_readme_quotes_pi_stars_gap_to_the_oracle_as_generated():
+    """π* warm-started from the causal MPC against the MPC oracle: the city cycle
+    (`training.json`), the highway cycle (`training_hwfet_64.json`) and cmap
+    (`training_cmap.json`, with its best and worst seed)."""
+    city, highway, cmap = (
+        _gap(f) for f in ("training.json", "training_hwfet_64.json", "training_cmap.json")
+    )
+    expected = (
+        f"{city['mean']:.1f} % above it on the held-out city cycle and {highway['mean']:.1f} % "
+        f"on the highway cycle, but {cmap['mean']:.1f} % ({cmap['best_seed']:.1f} to "
+        f"{cmap['worst_seed']:.1f} over 3 seeds) on `cmap`"
+    )
+    assert expected in _one_line(README)
