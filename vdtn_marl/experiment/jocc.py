@@ -65,13 +65,12 @@ from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.experiment import outputs
 from vdtn_marl.runs import (
     CHECKPOINT_DIR,
     EVALUATION_FILE,
-    RAW_EVALUATION_FILE,
     SUMMARY_FILE,
     MetricsLog,
-    atomic_write_bytes,
     atomic_write_json,
     check_interrupt,
     check_summary_file,
@@ -562,59 +561,17 @@ class JointOptimisation:
         return summary
 
     def write_raw_evaluation(self) -> None:
-        """The last evaluation's arrays as ``evaluation_raw.npz``: per-scenario returns of the
-        acting system and of π*, scenario 0's |gap|/|speed| error traces [K, F] and every
-        delivered CAM's latency (ms), for plots across runs (the leaderboard's)."""
-        import io
-
-        import numpy as np
-
+        """The last evaluation's arrays as ``evaluation_raw.npz`` (:mod:`.outputs`)."""
         optimal, acting = getattr(self, "_last_results", (None, None))
-        if acting is None:
-            return
-        arrays = {
-            "interval_s": np.float64(self.params.platoon.control_interval_s),
-            "returns": acting.returns.numpy(),
-            "optimal_returns": optimal.returns.numpy(),
-            **{key: value.numpy() for key, value in acting.traces.items()},
-        }
-        if acting.cam_latency_ms is not None:
-            arrays["cam_latency_ms"] = acting.cam_latency_ms.numpy()
-        buffer = io.BytesIO()
-        np.savez_compressed(buffer, **arrays)
-        atomic_write_bytes(self.run_dir / RAW_EVALUATION_FILE, buffer.getvalue())
+        if acting is not None:
+            outputs.write_raw_evaluation(self.run_dir, self.params, optimal, acting)
 
     def write_plots(self) -> list[str]:
         """Training curves, and error traces and CAM latency CDF of the last evaluation."""
-        from vdtn_marl import results
-
-        written = []
-        if self.train_log.rows:
-            written.append(
-                results.plot_training_curves(
-                    self.train_log.path, self.run_dir / results.TRAINING_CURVES_FILE
-                )
-            )
         acting = getattr(self, "_last_results", (None, None))[1]
-        if acting is not None:
-            pp = self.params.platoon
-            written.append(
-                results.plot_error_traces(
-                    acting.traces["gap_error_abs_m"],
-                    acting.traces["speed_error_abs_mps"],
-                    pp.control_interval_s,
-                    self.run_dir / results.ERROR_TRACES_FILE,
-                )
-            )
-            label = f"{self.cfg.rra.name} RRA, {self.cfg.control.name} control"
-            written.append(
-                results.plot_latency_cdf(
-                    {label: acting.cam_latency_ms},
-                    pp.control_interval_s * 1000.0,
-                    self.run_dir / results.LATENCY_CDF_FILE,
-                )
-            )
-        return [str(p) for p in written]
+        label = f"{self.cfg.rra.name} RRA, {self.cfg.control.name} control"
+        train_log = self.train_log.path if self.train_log.rows else None
+        return outputs.write_run_plots(self.run_dir, self.params, train_log, acting, label)
 
     def _advance(self) -> None:
         self.position["stage"] += 1
@@ -681,18 +638,6 @@ class JointOptimisation:
         return config
 
 
-def format_table(row: dict[str, Any]) -> str:
-    """A plain two-column table of an evaluation row (units are in the metric names)."""
-    width = max(len(k) for k in row)
-    lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
-    for key, value in row.items():
-        if key == "config" or isinstance(value, dict):
-            continue
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
-        lines.append(f"{key:<{width}}  {text}")
-    return "\n".join(lines)
-
-
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m vdtn_marl.experiment.jocc",
@@ -727,7 +672,7 @@ def main(argv: list[str] | None = None) -> int:
         )
         return 2
     summary = JointOptimisation(cfg, args.run_dir).run()
-    print(format_table(summary))
+    print(outputs.format_table(summary))
     print(f"outputs: {Path(args.run_dir).resolve()}")
     return 0
 

@@ -1,0 +1,76 @@
+"""What a run writes besides its logs and checkpoints: the last evaluation's arrays
+(``evaluation_raw.npz``, read by the leaderboard's plots), the run's plots (training curves,
+error traces, CAM latency CDF) and the plain metrics table printed at its end."""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl.runs import RAW_EVALUATION_FILE, atomic_write_bytes
+from vdtn_marl.sim.params import TwinParams
+
+
+def write_raw_evaluation(run_dir: Path, params: TwinParams, optimal: Any, acting: Any) -> None:
+    """``evaluation_raw.npz``: per-scenario returns of the acting system and of π*, scenario
+    0's |gap|/|speed| error traces [K, F] and every delivered CAM's latency (ms), for plots
+    across runs (the leaderboard's). ``optimal``/``acting``: evaluation results."""
+    import numpy as np
+
+    arrays = {
+        "interval_s": np.float64(params.platoon.control_interval_s),
+        "returns": acting.returns.numpy(),
+        "optimal_returns": optimal.returns.numpy(),
+        **{key: value.numpy() for key, value in acting.traces.items()},
+    }
+    if acting.cam_latency_ms is not None:
+        arrays["cam_latency_ms"] = acting.cam_latency_ms.numpy()
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    atomic_write_bytes(Path(run_dir) / RAW_EVALUATION_FILE, buffer.getvalue())
+
+
+def write_run_plots(
+    run_dir: Path, params: TwinParams, train_log: Path | None, acting: Any, label: str
+) -> list[str]:
+    """Training curves (from the ``metrics.csv`` at ``train_log``, if any) and, for the last
+    evaluation ``acting`` (if any), its error traces and CAM latency CDF; the paths written."""
+    from vdtn_marl import results
+
+    run_dir = Path(run_dir)
+    written = []
+    if train_log is not None:
+        written.append(
+            results.plot_training_curves(train_log, run_dir / results.TRAINING_CURVES_FILE)
+        )
+    if acting is not None:
+        pp = params.platoon
+        written.append(
+            results.plot_error_traces(
+                acting.traces["gap_error_abs_m"],
+                acting.traces["speed_error_abs_mps"],
+                pp.control_interval_s,
+                run_dir / results.ERROR_TRACES_FILE,
+            )
+        )
+        written.append(
+            results.plot_latency_cdf(
+                {label: acting.cam_latency_ms},
+                pp.control_interval_s * 1000.0,
+                run_dir / results.LATENCY_CDF_FILE,
+            )
+        )
+    return [str(p) for p in written]
+
+
+def format_table(row: dict[str, Any]) -> str:
+    """A plain two-column table of an evaluation row (units are in the metric names)."""
+    width = max(len(k) for k in row)
+    lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
+    for key, value in row.items():
+        if key == "config" or isinstance(value, dict):
+            continue
+        text = f"{value:.4g}" if isinstance(value, float) else str(value)
+        lines.append(f"{key:<{width}}  {text}")
+    return "\n".join(lines)
