@@ -103,6 +103,8 @@ def test_bad_estimator_arguments_raise():
         make_ivoi_estimator("td")
     with pytest.raises(ValueError, match="ivoi_estimator='bogus'"):
         make_ivoi_estimator("bogus")
+    with pytest.raises(TypeError, match="horizon_interval"):  # a misspelt option
+        make_ivoi_estimator("td", value=lambda o: o[..., 0], horizon_interval=5)
     with pytest.raises(TypeError, match="must be callable"):
         TDIVoIEstimator(value=3)
     with pytest.raises(ValueError, match="discount"):

@@ -237,8 +237,7 @@ def _markdown(
     if n_done < n_cells:
         how = "rerun the command" if cfg.run else "rerun the command without `run=false`"
         lines.append(
-            f"- **incomplete**: {n_done} of {n_cells} runs are complete; {how} to finish the "
-            "others"
+            f"- **incomplete**: {n_done} of {n_cells} runs are complete; {how} to finish the others"
         )
     if target is not None:
         lines += ["", *target_markdown(target)]

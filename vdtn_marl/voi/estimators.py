@@ -237,10 +237,17 @@ class TDIVoIEstimator:
 
     @classmethod
     def from_reference(
-        cls, reference: VoIReference, *, baseline: str = "optimal", **_: Any
+        cls,
+        reference: VoIReference,
+        *,
+        baseline: str = "optimal",
+        horizon_intervals: int | None = None,
+        bootstrap: bool | None = None,
     ) -> TDIVoIEstimator:
-        """The TD error of ``reference.value`` (required); the rollout options do not apply,
-        and ξ can only compare with π* (``baseline="optimal"``)."""
+        """The TD error of ``reference.value`` (required). The rollout options
+        (``horizon_intervals``, ``bootstrap``) are accepted, so one set of options builds any
+        registered estimator, and do not apply; ξ can only compare with π*
+        (``baseline="optimal"``). Any other option is a ``TypeError``."""
         if reference.value is None:
             raise ValueError("ivoi_estimator='td' needs value=<critic of the optimal policy>")
         if baseline != "optimal":
