@@ -111,25 +111,26 @@ from vdtn_marl.benchmarking import (
     provenance,
     table_console,
 )
+from vdtn_marl.core.interval import IntervalEngine, close_interval
 from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.results import pyplot_agg, save_figure
 from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
-from vdtn_marl.voi import close_interval
 
 RESULTS = Path("benchmarks/results/cam_value.json")
 LEARNED = "learned"
 DEFAULT_STARTS = "20,40,60,80,100,120,140,160"
 
 
-class ActingSystem:
+class ActingSystem(IntervalEngine):
     """One copy of the acting system on a twin: control policy, completer and RRA policy,
-    stepped one control interval at a time."""
+    stepped one control interval at a time (the interval engine, with the subframes run here
+    to see which links transmit)."""
 
     def __init__(self, twin: DigitalTwin, control, completion, rra):
-        self.twin = twin
-        self.control = control
-        self.completion = completion
+        super().__init__(
+            twin, perfect=False, rra_policy=rra, control=control, completion=completion
+        )
         self.rra = rra
 
     def copy(self, base_control, base_rra) -> ActingSystem:
@@ -155,17 +156,13 @@ class ActingSystem:
         pending = []
         for _ in range(twin.subframes_per_interval):
             action = torch.as_tensor(self.rra(twin.rra_observation())).long()
-            pending.append(torch.as_tensor(twin.step_subframe(action).was_pending))
+            pending.append(torch.as_tensor(self.step_subframe(action, validated=False).was_pending))
         return torch.stack(pending)
-
-    def _decide(self, cams_lost: bool) -> torch.Tensor:
-        observation = self.twin.vehicle_observation(False, cams_lost=cams_lost)
-        return self.control(self.completion.complete(observation, self.twin.interval))
 
     def finish(self, estimator=None) -> IntervalRecord:
         """Decide and integrate the interval, recording what ``estimator`` needs (the command
         a lost CAM would have led to, for the ``cam_lost`` baseline)."""
-        return close_interval(self.twin, estimator, self._decide)
+        return close_interval(self.twin, estimator, self.decide)
 
     def begin(self) -> None:
         self.twin.begin_interval()

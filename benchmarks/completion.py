@@ -37,6 +37,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.algos.completion import train_completion_predictor
+from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.runs import atomic_write_json, script_command
 from vdtn_marl.sim.cacc import CACCController
@@ -90,6 +91,9 @@ def run(params: TwinParams, args, completion: str | None, predictor=None) -> dic
     controller = CACCController(params.platoon)
     rra = RandomRRAPolicy(params.radio.num_actions, args.seed)
     completer = None if perfect else make_completion(completion, predictor, params.platoon)
+    engine = IntervalEngine(  # the random RRA's actions are valid: not checked, as in training
+        twin, perfect=perfect, rra_policy=rra, completion=completer, validate_rra=False
+    )
     b, f = args.batch_size, twin.num_followers
     dev = twin.device
     ret = torch.zeros(b, device=dev, dtype=torch.float64)
@@ -106,12 +110,10 @@ def run(params: TwinParams, args, completion: str | None, predictor=None) -> dic
     start = time.perf_counter()
     for _ in range(params.episode_intervals):
         if perfect:
-            obs = twin.vehicle_observation(perfect=True)
+            obs = engine.observe()
         else:
-            for _ in range(twin.subframes_per_interval):
-                actions = rra(twin.rra_observation())
-                twin.step_subframe(actions, validated=True)
-            raw = twin.vehicle_observation(perfect=False)
+            engine.run_radio()
+            raw = twin.vehicle_observation(perfect=False)  # and completed: its error is measured
             obs = completer.complete(raw, twin.interval)
             stale = (raw[..., CAM_AGE] > 0) & alive[:, None]
             err = (obs[..., CAM_ACCEL : CAM_COMMAND + 1] - twin.cam_snapshot).double() ** 2
@@ -121,7 +123,7 @@ def run(params: TwinParams, args, completion: str | None, predictor=None) -> dic
             count += int(live.sum())
             count_stale += int(stale.sum())
         before = twin.platoon.command_mps2[:, 1:]
-        record = twin.finish_interval(controller(obs), perfect=perfect)
+        record = engine.close(controller(obs)).record
         reward = record.reward.double().sum(-1) * alive
         jerk = (record.command_mps2 - before) / params.platoon.control_interval_s
         step_terms = torch.stack(

@@ -1,6 +1,6 @@
 """The package's imports form a DAG of rooms, bottom to top (docs/layout.md):
 
-errors → data, runs → sim → voi → envs (and the registry) → algos → experiment (config, runs'
+errors → data, runs → sim → core → voi → envs (and the registry) → algos → experiment (config, runs'
 results, benchmark helpers) → leaderboard → cli.
 
 Every ``import`` counts, deferred ones inside functions included. ``__main__`` modules are entry
@@ -22,6 +22,7 @@ LAYERS = {
     "data": 1,
     "runs": 1,
     "sim": 2,
+    "core": 3,
     "voi": 4,
     "envs": 5,
     "registry": 5,

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 import torch
 
+from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.cacc import CACCController
@@ -79,16 +80,17 @@ def collect_completion_data(
     gen.manual_seed(seed + 1)
     feats, targets, stale = [], [], []
     pp = params.platoon
+    # the recorder completes nothing: it only keeps the features; the commands are CACC's on
+    # the impaired observation plus noise, so the engine closes with explicit commands
+    engine = IntervalEngine(twin, perfect=False, rra_policy=rra)
     for episode in range(episodes):
         if episode:
             twin.reset()
         recorder.reset()
         alive = torch.ones(batch_size, dtype=torch.bool, device=twin.device)
         for _ in range(length):
-            for _ in range(twin.subframes_per_interval):
-                actions = torch.as_tensor(rra(twin.rra_observation()), device=twin.device)
-                twin.step_subframe(actions.long())
-            obs = twin.vehicle_observation(perfect=False)
+            engine.run_radio()
+            obs = engine.observe()
             recorder.complete(obs, twin.interval)
             keep = alive[:, None].expand(-1, twin.num_followers)
             feats.append(recorder.features[keep])
@@ -98,9 +100,9 @@ def collect_completion_data(
                 obs.shape[:2], generator=gen, device=twin.device
             )
             commands = (controller(obs) + noise).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
-            record = twin.finish_interval(commands, perfect=False)
-            alive = alive & ~record.collided.any(-1)
-            twin.begin_interval()
+            closed = engine.close(commands)
+            alive = alive & ~closed.terminated
+            engine.advance(radio=False)  # every scenario (a collided one is no longer recorded)
     return torch.cat(feats).cpu(), torch.cat(targets).float().cpu(), torch.cat(stale).cpu()
 
 

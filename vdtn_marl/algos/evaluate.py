@@ -17,12 +17,13 @@ from dataclasses import dataclass, field
 
 import torch
 
+from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.runs import check_interrupt
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
-from vdtn_marl.voi import IVoIEstimator, close_interval
+from vdtn_marl.voi import IVoIEstimator
 
 ControlPolicy = Callable[[torch.Tensor], torch.Tensor]  # observations [B, F, 8] → m/s² [B, F]
 RRAPolicy = Callable[[torch.Tensor], torch.Tensor]  # RRA observations [B, L, D] → long [B, L]
@@ -176,27 +177,28 @@ def evaluate_system(
     subframe_ms = params.platoon.subframe_s * 1000.0
     weight = 1.0
 
-    def decide(cams_lost: bool) -> torch.Tensor:
-        """The control policy's commands on this interval's observation."""
-        observation = twin.vehicle_observation(perfect, cams_lost=cams_lost)
-        if completion is not None and not perfect:
-            observation = completion.complete(observation, twin.interval)
-        return control(observation)
-
+    engine = IntervalEngine(
+        twin,
+        perfect=perfect,
+        rra_policy=rra if radio else None,
+        control=control,
+        completion=completion,
+        ivoi_estimator=ivoi_estimator,
+    )
+    if radio:
+        engine.run_radio()
     for k in range(intervals):
         check_interrupt()  # Ctrl-C stops here, between intervals (vdtn_marl.runs)
         if k > 0:
-            twin.begin_interval()
-        if radio:
-            for _ in range(t):
-                twin.step_subframe(torch.as_tensor(rra(twin.rra_observation())).long())
-        record = close_interval(twin, ivoi_estimator, decide, perfect)
+            engine.advance()  # every scenario (a collided one is no longer counted)
+        closed = engine.close()
+        record = closed.record
         live = alive[:, None].double()
         reward = record.reward.double()
         returns += weight * live * reward
         xi = None
         if ivoi_estimator is not None:
-            xi = ivoi_estimator(twin, record).double()
+            xi = closed.xi.double()
             ivoi_sums += weight * live * xi
             xi_all.add(xi, alive[:, None].expand(b, f))
         reward_sum += (live * reward).sum()

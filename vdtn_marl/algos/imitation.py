@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import torch
 
 from vdtn_marl.algos.ppo import SEED_STRIDE, ActorPolicy, PPOTrainer
+from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 
@@ -136,11 +137,12 @@ def distill_teacher(
         twin.reset(seed=seed)
         if hasattr(teacher, "reset"):
             teacher.reset()
+        engine = IntervalEngine(twin, perfect=True)
         alive = torch.ones(scenarios, dtype=torch.bool, device=device)
         for k in range(intervals):
             if k > 0:
-                twin.begin_interval()
-            observation = twin.vehicle_observation(perfect=True)
+                engine.advance()
+            observation = engine.observe()
             with torch.no_grad():
                 label = teacher(twin).to(observation.dtype)
                 if r == 0:
@@ -152,8 +154,7 @@ def distill_teacher(
                     act = student(observation).to(label.dtype)
             observations.append(observation[alive])  # a collided scenario teaches nothing
             labels.append(label[alive])
-            record = twin.finish_interval(act.clamp(low, high), perfect=True)
-            alive &= ~record.collided.any(-1)
+            alive &= ~engine.close(act.clamp(low, high)).terminated
             tick(1)
         data_x = torch.cat(observations)
         data_y = torch.cat(labels)

@@ -81,7 +81,39 @@ def check_one_trace_choice(trace_source, model_kwargs: dict) -> None:
         )
 
 
-class VDTNParallelEnv(ParallelEnv):
+#: The acting parts a face keeps on its :class:`~vdtn_marl.core.interval.IntervalEngine`:
+#: the face's attribute name → the engine's.
+ENGINE_PARTS = {
+    "rra_policy": "rra_policy",
+    "control_module": "control",
+    "completion": "completion",
+    "ivoi_estimator": "ivoi_estimator",
+    "reward_fn": "reward_fn",
+}
+
+
+class EngineBacked:
+    """A face whose acting parts (:data:`ENGINE_PARTS`) live on its ``engine``: reading
+    ``env.completion`` reads the engine's, and assigning one (``env.ivoi_estimator = …``)
+    changes what the engine runs. Build ``self.engine`` before touching them."""
+
+    def __setattr__(self, name, value):
+        target = ENGINE_PARTS.get(name)
+        if target is None:
+            super().__setattr__(name, value)
+        else:  # also for torch modules, which nn.Module would otherwise register
+            setattr(self.__dict__["engine"], target, value)
+
+
+for _name, _target in ENGINE_PARTS.items():
+    setattr(
+        EngineBacked,
+        _name,
+        property(lambda self, _t=_target: getattr(self.engine, _t), doc=f"the engine's {_target}"),
+    )
+
+
+class VDTNParallelEnv(EngineBacked, ParallelEnv):
     """Common plumbing of the four environments (one scenario, B = 1).
 
     Model parameters are keyword arguments (any field of

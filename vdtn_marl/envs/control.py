@@ -44,6 +44,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from vdtn_marl.core.interval import IntervalEngine, check_callable
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
     vehicle_action_space,
@@ -109,21 +110,20 @@ class PlatoonControlEnv(VDTNParallelEnv):
             radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )
         self.impaired = impaired
-        self.completion = make_completion(
-            completion, completion_predictor, self.twin.params.platoon
-        )
         self.metadata = {
             **self.metadata,
             "name": "platoon_control_impaired_v1" if impaired else "platoon_control_v0",
         }
         self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
         self.agents: list[str] = []
-        self.rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
-        if not callable(self.rra_policy):
-            raise TypeError(
-                f"rra_policy={rra_policy!r} must be callable: "
-                "observations [1, L, D] -> actions [1, L]"
-            )
+        rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
+        check_callable("rra_policy", rra_policy, "observations [1, L, D] -> actions [1, L]")
+        self.engine = IntervalEngine(  # with radio (impaired) it runs each interval's T subframes
+            self.twin,
+            perfect=not impaired,
+            rra_policy=rra_policy,
+            completion=make_completion(completion, completion_predictor, self.twin.params.platoon),
+        )
 
     def _observation_space(self, agent):
         return vehicle_observation_space(self.twin)
@@ -132,28 +132,17 @@ class PlatoonControlEnv(VDTNParallelEnv):
         return vehicle_action_space(self.twin)
 
     def reset(self, seed: int | None = None, options: dict | None = None):
-        self.twin.reset(seed=seed)
-        self.completion.reset()
         if seed is not None and hasattr(self.rra_policy, "seed"):
             self.rra_policy.seed(seed)
+        self.engine.reset(seed=seed)  # and the first interval's radio when impaired
         self.agents = self.possible_agents[:]
         self.last_record = None
-        if self.impaired:
-            self._run_radio()
         return self._observations(), {a: dict(INITIAL_INTERVAL_INFO) for a in self.agents}
-
-    def _run_radio(self) -> None:
-        twin = self.twin
-        for _ in range(twin.subframes_per_interval):
-            twin.step_subframe(self.rra_policy(twin.rra_observation()))
 
     def _observations(self, cams_lost: bool = False) -> dict[str, np.ndarray]:
         """Each follower's observation; ``cams_lost`` (impaired, at an episode's end): what it
         knows at the next decision time before that interval's CAM arrives."""
-        obs = self.twin.vehicle_observation(perfect=not self.impaired, cams_lost=cams_lost)
-        if self.impaired:
-            obs = self.completion.complete(obs, self.twin.interval)
-        obs = obs[0].cpu().numpy()
+        obs = self.engine.observe(cams_lost=cams_lost)[0].cpu().numpy()
         return {name: obs[i] for i, name in enumerate(self.possible_agents)}
 
     def step(self, actions: dict):
@@ -161,16 +150,12 @@ class PlatoonControlEnv(VDTNParallelEnv):
         if not self.agents:
             raise RuntimeError("step() called on a finished episode; call reset() first")
         commands = self._vehicle_commands(actions, self.agents)
-        record = self.twin.finish_interval(
-            torch.as_tensor(commands, device=self.twin.device)[None], perfect=not self.impaired
-        )
-        self.last_record = record
-        terminated = bool(record.collided.any())
-        truncated = bool(record.truncated[0]) and not terminated
+        closed = self.engine.close(torch.as_tensor(commands, device=self.twin.device)[None])
+        record = self.last_record = closed.record
+        terminated = bool(closed.terminated[0])
+        truncated = bool(closed.truncated[0])
         if not (terminated or truncated):
-            self.twin.begin_interval()
-            if self.impaired:
-                self._run_radio()
+            self.engine.advance()  # the next interval, with its radio when impaired
         rewards = record.reward[0].tolist()
         names = self.agents
         infos = interval_infos(record, names, self.twin.interval_ms, self.twin.subframe_ms)

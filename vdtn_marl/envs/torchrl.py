@@ -36,8 +36,15 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, Unbounded
 from torchrl.envs import EnvBase
 
+from vdtn_marl.core.interval import (
+    IntervalEngine,
+    check_burn_in,
+    check_callable,
+    check_estimator_has_control,
+)
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.base import (
+    EngineBacked,
     check_one_trace_choice,
     rra_observation_space,
     vehicle_observation_space,
@@ -50,7 +57,7 @@ from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
-from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
+from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
 
 MODES = ("control", "control_impaired", "rra", "joint")
 
@@ -65,7 +72,7 @@ def _batch_size(batch_size: int | Sequence[int] | torch.Size) -> int:
     return int(batch_size)
 
 
-class VDTNTorchRLEnv(EnvBase):
+class VDTNTorchRLEnv(EngineBacked, EnvBase):
     """B scenarios of the VDTN benchmark as one batched TorchRL environment (see module doc).
 
     Args:
@@ -151,61 +158,51 @@ class VDTNTorchRLEnv(EnvBase):
             float(pp.accel_max_mps2),
         )
 
-        self.rra_policy = None
+        rra_policy_used = None
         if mode == "control_impaired":
-            self.rra_policy = rra_policy or RandomRRAPolicy(self.num_actions, seed)
-            if not callable(self.rra_policy):
-                raise TypeError(
-                    f"rra_policy={rra_policy!r} must be callable: "
-                    "observations [B, L, D] -> actions [B, L]"
-                )
+            rra_policy_used = rra_policy or RandomRRAPolicy(self.num_actions, seed)
+            check_callable(
+                "rra_policy", rra_policy_used, "observations [B, L, D] -> actions [B, L]"
+            )
         elif rra_policy is not None:
             raise ConfigError(
                 f"rra_policy is only used with mode='control_impaired', not mode={mode!r}"
             )
-
-        self.control_module = None
+        control = None
         if mode == "rra":
-            self.control_module = control_module or CACCController(pp)
-            if not callable(self.control_module):
-                raise TypeError(
-                    f"control_module={control_module!r} must be callable: observations -> commands"
-                )
+            control = control_module or CACCController(pp)
         elif control_module is not None:
             raise ConfigError(f"control_module is only used with mode='rra', not mode={mode!r}")
-
-        self.reward_fn = None
-        self.ivoi_estimator = None
+        reward_fn = estimator = None
         if self.has_rra:
-            self.reward_fn = RRAReward(
+            reward_fn = RRAReward(
                 reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
             )
             estimator_kwargs = (
                 {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
             )
-            self.ivoi_estimator = make_ivoi_estimator(
-                ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
+            estimator = make_ivoi_estimator(
+                ivoi_estimator if reward_fn.uses_ivoi else "none", **estimator_kwargs
             )
-        if mode == "joint" and getattr(self.ivoi_estimator, "needs_command_if_lost", False):
-            raise ConfigError(
-                "an IVoI estimator with the cam_lost baseline needs a control module to ask "
-                "what a follower would have done had its CAM been lost: use mode='rra', "
-                "not mode='joint' (where the vehicles are agents)"
-            )
-        self.completion = make_completion(completion, completion_predictor, pp)
-        if isinstance(burn_in_intervals, bool) or not isinstance(burn_in_intervals, int):
-            raise ConfigError(f"burn_in_intervals={burn_in_intervals!r} must be an integer")
+        check_estimator_has_control(
+            estimator,
+            mode == "joint",
+            "use mode='rra', not mode='joint' (where the vehicles are agents)",
+        )
+        self.engine = IntervalEngine(
+            twin,
+            perfect=not self.impaired,
+            rra_policy=rra_policy_used,
+            control=control,
+            completion=make_completion(completion, completion_predictor, pp),
+            ivoi_estimator=estimator,
+            reward_fn=reward_fn,
+        )
+        check_burn_in(burn_in_intervals, params.episode_intervals)
         if burn_in_intervals and mode != "rra":
             raise ConfigError(f"burn_in_intervals is only used with mode='rra', not mode={mode!r}")
-        if not 0 <= burn_in_intervals < params.episode_intervals:
-            raise ConfigError(
-                f"burn_in_intervals={burn_in_intervals!r} must be in "
-                f"[0, {params.episode_intervals - 1}] (episode_intervals − 1)"
-            )
         self.burn_in_intervals = burn_in_intervals
         self._burn_in_exact: int | None = None  # set by burned_in()
-        self._bandwidth_hz = params.radio.subchannel_bandwidth_hz
-        self._subframe_s = pp.subframe_s
         self._vehicle_obs: torch.Tensor | None = None
         self._make_specs()
 
@@ -354,16 +351,6 @@ class VDTNTorchRLEnv(EnvBase):
         return action.long()
 
     # ------------------------------------------------------------------ radio
-    def _run_radio(self, mask: torch.Tensor | None = None, policy: Callable | None = None) -> None:
-        """Run the interval's T subframes with ``policy`` (default ``rra_policy``); with
-        ``mask`` [B] only the masked scenarios keep the result (the others had already run this
-        interval)."""
-        twin = self.twin
-        policy = policy or self.rra_policy
-        for _ in range(twin.subframes_per_interval):
-            actions = policy(twin.rra_observation())
-            twin.step_subframe(torch.as_tensor(actions, device=self.device).long(), mask=mask)
-
     @contextlib.contextmanager
     def burned_in(self, intervals: int) -> Iterator[None]:
         """Inside the block, a full reset drives every scenario for exactly ``intervals``
@@ -391,28 +378,13 @@ class VDTNTorchRLEnv(EnvBase):
         if self._burn_in_exact is not None:
             intervals = self._burn_in_exact
         rra = RandomRRAPolicy(self.num_actions, draw[1])
+        engine = self.engine
         for _ in range(intervals):
-            self._run_radio(policy=rra)
-            record = twin.finish_interval(self._control_module_commands(False), perfect=False)
-            collided = record.collided.any(-1)
+            engine.run_radio(policy=rra)
+            collided = engine.finish().collided.any(-1)
+            engine.advance(~collided)
             if bool(collided.any()):
-                if not bool(collided.all()):
-                    twin.begin_interval(~collided)
-                twin.reset(mask=collided)
-                self.completion.reset(collided)
-            else:
-                twin.begin_interval()
-
-    def _impaired_vehicle_obs(
-        self, mask: torch.Tensor | None = None, cams_lost: bool = False
-    ) -> torch.Tensor:
-        """Impaired vehicle observations [B, F, 8] after completion (docs/model.md §4.7);
-        ``cams_lost``: as if this interval's CAMs had been lost."""
-        obs = self.twin.vehicle_observation(perfect=False, cams_lost=cams_lost)
-        return self.completion.complete(obs, self.twin.interval, mask)
-
-    def _control_module_commands(self, cams_lost: bool) -> torch.Tensor:
-        return self.control_module(self._impaired_vehicle_obs(cams_lost=cams_lost))
+                engine.reset(collided)
 
     # ------------------------------------------------------------------ outputs
     def _vehicle_acts(self) -> torch.Tensor:
@@ -470,31 +442,19 @@ class VDTNTorchRLEnv(EnvBase):
         return torch.stack(parts).any(0)
 
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
-        twin = self.twin
+        twin, engine = self.twin, self.engine
         mask = self._reset_mask(tensordict)
         full = mask is None or bool(mask.all())
         if full:
-            twin.reset()
-            self.completion.reset()
-            if self.mode == "control_impaired":
-                self._run_radio()
+            engine.reset()  # with the first interval's radio in "control_impaired"
             if self.burn_in_intervals or self._burn_in_exact is not None:
                 self._burn_in()
         elif bool(mask.any()):
-            subframe = twin.subframe
-            twin.reset(mask=mask)
-            self.completion.reset(mask)
-            if self.mode == "control_impaired":
-                self._run_radio(mask)
-            elif self.has_rra and subframe < twin.subframes_per_interval:
-                twin.subframe = subframe  # the shared clock stays where the other scenarios are
+            engine.reset(mask, keep_clock=self.has_rra)
 
         vehicle_obs = rra_obs = None
         if self.has_vehicles:
-            if not self.impaired:
-                fresh = twin.vehicle_observation(perfect=True)
-            else:
-                fresh = self._impaired_vehicle_obs(None if full or self.mode != "joint" else mask)
+            fresh = engine.observe(None if full or self.mode != "joint" else mask)
             if self.mode == "joint":
                 if full or self._vehicle_obs is None:
                     self._vehicle_obs = fresh
@@ -514,35 +474,22 @@ class VDTNTorchRLEnv(EnvBase):
             return self._step_subframe(tensordict)
         return self._step_interval(tensordict)
 
-    def _finish(self, record) -> tuple[torch.Tensor, torch.Tensor]:
-        terminated = record.collided.any(-1)
-        truncated = record.truncated & ~terminated
-        return terminated, truncated
-
     def _step_interval(self, tensordict: TensorDictBase) -> TensorDictBase:
-        twin = self.twin
-        perfect = not self.impaired
-        commands = self._vehicle_commands(tensordict)
-        record = twin.finish_interval(commands, perfect=perfect)
-        terminated, truncated = self._finish(record)
-        going = ~(terminated | truncated)
+        engine = self.engine
+        closed = engine.close(self._vehicle_commands(tensordict))
+        going = closed.going
         all_going = bool(going.all())
         final_obs = None
         if self.impaired and not all_going:
             # what finished scenarios know at the next decision time, before its CAM arrives
-            final_obs = self._impaired_vehicle_obs(~going, cams_lost=True)
-        if all_going:
-            twin.begin_interval()
-            if self.impaired:
-                self._run_radio()
-        elif bool(going.any()):
-            twin.begin_interval(going)
-            if self.impaired:
-                self._run_radio(going)
-        obs = twin.vehicle_observation(perfect=True) if perfect else self._impaired_vehicle_obs()
+            final_obs = engine.observe(~going, cams_lost=True)
+        engine.advance(going)  # with the radio of the next interval in "control_impaired"
+        obs = engine.observe()
         if final_obs is not None:
             obs = torch.where(going[:, None, None], obs, final_obs)
-        return self._output(obs, None, record.reward, None, terminated, truncated)
+        return self._output(
+            obs, None, closed.record.reward, None, closed.terminated, closed.truncated
+        )
 
     def _step_subframe(self, tensordict: TensorDictBase) -> TensorDictBase:
         twin = self.twin
@@ -551,8 +498,8 @@ class VDTNTorchRLEnv(EnvBase):
         rra_actions = self._rra_actions(tensordict)
         commands = self._vehicle_commands(tensordict) if closing and self.has_vehicles else None
 
-        outcome = twin.step_subframe(rra_actions, validated=True)
-        rra_reward, _ = self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
+        engine = self.engine
+        rra_reward, _ = engine.step_subframe(rra_actions)
         rra_reward = rra_reward.to(torch.float32)
         b = self.num_scenarios
         terminated = torch.zeros(b, dtype=torch.bool, device=self.device)
@@ -563,30 +510,23 @@ class VDTNTorchRLEnv(EnvBase):
         going = None
         final_rra_obs = None
         if closing:
-            decide = self._control_module_commands if commands is None else None
-            record = close_interval(twin, self.ivoi_estimator, decide, commands=commands)
-            xi = self.ivoi_estimator(twin, record)
-            lost = record.cam_delay_subframes > twin.subframes_per_interval
-            rra_reward = rra_reward + self.reward_fn.at_interval_end(xi, lost).to(torch.float32)
+            closed = engine.close(commands)
+            rra_reward = rra_reward + closed.rra_reward.to(torch.float32)
             if vehicle_reward is not None:
-                vehicle_reward = record.reward
-            terminated, truncated = self._finish(record)
-            going = ~(terminated | truncated)
-            if bool(going.all()):
-                twin.begin_interval()
-            else:
+                vehicle_reward = closed.record.reward
+            terminated, truncated, going = closed.terminated, closed.truncated, closed.going
+            if not bool(going.all()):  # what finished scenarios show, before the next interval
                 final_rra_obs = twin.rra_observation().clone()
                 if self.has_vehicles:
-                    final_vehicle_obs = self._impaired_vehicle_obs(~going, cams_lost=True)
+                    final_vehicle_obs = engine.observe(~going, cams_lost=True)
                     self._vehicle_obs = torch.where(
                         going[:, None, None], self._vehicle_obs, final_vehicle_obs
                     )
-                if bool(going.any()):
-                    twin.begin_interval(going)
+            engine.advance(going)
         vehicle_obs = None
         if self.has_vehicles:
             if twin.subframe == last:
-                fresh = self._impaired_vehicle_obs()
+                fresh = engine.observe()
                 self._vehicle_obs = (
                     fresh
                     if going is None

@@ -46,6 +46,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from vdtn_marl.core.interval import IntervalEngine, check_estimator_has_control
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
     rra_action_space,
@@ -57,10 +58,9 @@ from vdtn_marl.envs.base import (
 )
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
 from vdtn_marl.envs.rra_reward import RRAReward
-from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVoIEstimator, close_interval, make_ivoi_estimator
+from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
 
 
 class TwoTimescaleEnv(VDTNParallelEnv):
@@ -85,32 +85,32 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         completion_predictor=None,
         **model_kwargs,
     ):
-        self.reward_fn = RRAReward(
-            reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
-        )
+        reward_fn = RRAReward(reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty)
         super().__init__(
             radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )
         twin = self.twin
-        self.completion = make_completion(completion, completion_predictor, twin.params.platoon)
         estimator_kwargs = (
             {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
         )
-        self.ivoi_estimator = make_ivoi_estimator(
-            ivoi_estimator if self.reward_fn.uses_ivoi else "none", **estimator_kwargs
+        estimator = make_ivoi_estimator(
+            ivoi_estimator if reward_fn.uses_ivoi else "none", **estimator_kwargs
         )
         self.vehicles_are_agents = vehicles_are_agents
-        if vehicles_are_agents and getattr(self.ivoi_estimator, "needs_command_if_lost", False):
-            raise ConfigError(
-                "an IVoI estimator with the cam_lost baseline needs a control module to ask "
-                "what a follower would have done had its CAM been lost; with the vehicles as "
-                "agents (vehicles_are_agents=True) there is none: use the V2X RRA env"
-            )
-        self.control_module = control_module or CACCController(twin.params.platoon)
-        if not callable(self.control_module):
-            raise TypeError(
-                f"control_module={control_module!r} must be callable: observations -> commands"
-            )
+        check_estimator_has_control(
+            estimator,
+            vehicles_are_agents,
+            "with the vehicles as agents (vehicles_are_agents=True) there is none: use the V2X "
+            "RRA env",
+        )
+        self.engine = IntervalEngine(  # the RRA agents step the subframes
+            twin,
+            perfect=False,
+            control=control_module or CACCController(twin.params.platoon),
+            completion=make_completion(completion, completion_predictor, twin.params.platoon),
+            ivoi_estimator=estimator,
+            reward_fn=reward_fn,
+        )
         self.vehicle_agents = [vehicle_name(i + 1) for i in range(twin.num_followers)]
         self.rra_agents = [rra_name(i + 1) for i in range(twin.num_links)]
         self.possible_agents = (
@@ -124,8 +124,6 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         self._period = {
             a: twin.subframes_per_interval for a in self.vehicle_agents
         } | dict.fromkeys(self.rra_agents, 1)
-        self._bandwidth_hz = twin.params.radio.subchannel_bandwidth_hz
-        self._subframe_s = twin.params.platoon.subframe_s
 
     # -- clocks
     def clock_period(self, agent: str) -> int:
@@ -151,8 +149,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
 
     # -- API
     def reset(self, seed: int | None = None, options: dict | None = None):
-        self.twin.reset(seed=seed)
-        self.completion.reset()
+        self.engine.reset(seed=seed)
         self.agents = self.possible_agents[:]
         self.last_record = None
         self._refresh_vehicle_obs()
@@ -161,15 +158,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
 
     def _refresh_vehicle_obs(self, cams_lost: bool = False) -> None:
         if self.vehicles_are_agents:
-            obs = self._completed_vehicle_observation(cams_lost)[0].cpu().numpy()
+            obs = self.engine.observe(cams_lost=cams_lost)[0].cpu().numpy()
             self._vehicle_obs = {name: obs[i] for i, name in enumerate(self.vehicle_agents)}
-
-    def _completed_vehicle_observation(self, cams_lost: bool = False) -> torch.Tensor:
-        obs = self.twin.vehicle_observation(perfect=False, cams_lost=cams_lost)
-        return self.completion.complete(obs, self.twin.interval)
-
-    def _control_module_commands(self, cams_lost: bool) -> torch.Tensor:
-        return self.control_module(self._completed_vehicle_observation(cams_lost))
 
     def _observations(self) -> dict[str, np.ndarray]:
         rra = self._as_numpy(self.twin.rra_observation())[0].copy()
@@ -219,32 +209,26 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         if closes_interval and self.vehicles_are_agents:
             commands = torch.as_tensor(self._vehicle_commands(actions, self.vehicle_agents))[None]
 
-        outcome = twin.step_subframe(self._to_twin(rra_actions), validated=True)
-        reward, throughput = self.reward_fn.per_subframe(
-            outcome, self._bandwidth_hz, self._subframe_s
-        )
+        reward, throughput = self.engine.step_subframe(self._to_twin(rra_actions))
         rra_reward = self._as_numpy(reward)[0]
         throughput_mbps = float(throughput[0])
         vehicle_reward = [0.0] * twin.num_followers
         terminated = truncated = False
         closing = ivoi = None
         if closes_interval:
-            decide = self._control_module_commands if commands is None else None
-            record = close_interval(twin, self.ivoi_estimator, decide, commands=commands)
-            self.last_record = record
-            xi = self.ivoi_estimator(twin, record)
-            lost = record.cam_delay_subframes > twin.subframes_per_interval
-            extra = self.reward_fn.at_interval_end(xi, lost)[0].cpu().numpy()
+            closed = self.engine.close(commands)
+            record = self.last_record = closed.record
+            extra = closed.rra_reward[0].cpu().numpy()
             rra_reward = rra_reward.astype(np.float64) + extra
-            ivoi = xi[0].tolist()
+            ivoi = closed.xi[0].tolist()
             vehicle_reward = record.reward[0].tolist()
             closing = interval_infos(
                 record, self.vehicle_agents, twin.interval_ms, twin.subframe_ms
             )
-            terminated = bool(record.collided.any())
-            truncated = bool(record.truncated[0]) and not terminated
+            terminated = bool(closed.terminated[0])
+            truncated = bool(closed.truncated[0])
             if not (terminated or truncated):
-                twin.begin_interval()
+                self.engine.advance()
             else:  # what the followers know at the next decision time, before its CAM arrives
                 self._refresh_vehicle_obs(cams_lost=True)
         if self._vehicle_tick_next():

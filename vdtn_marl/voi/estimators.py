@@ -1,17 +1,18 @@
 """The IVoI estimators (docs/model.md §5) and their registry :data:`IVOI_ESTIMATORS`: the
 one-step TD error of v* (:class:`TDIVoIEstimator`), counterfactual rollouts
-(:class:`RolloutIVoIEstimator`), ξ = 0 (:class:`ZeroIVoIEstimator`), and
-:func:`close_interval`, which finishes a twin interval with what an estimator needs."""
+(:class:`RolloutIVoIEstimator`) and ξ = 0 (:class:`ZeroIVoIEstimator`). :func:`close_interval`,
+which finishes a twin interval with what an estimator needs, lives in
+:mod:`vdtn_marl.core.interval` and is re-exported here."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
 import numpy as np
 import torch
 
+from vdtn_marl.core.interval import close_interval  # noqa: F401 - re-exported; lives in core
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.backend import repeat_rows, to_numpy, to_torch, xp
 from vdtn_marl.sim.cacc import CACCController
@@ -274,32 +275,6 @@ class ZeroIVoIEstimator:
 
     def __call__(self, twin: DigitalTwin, record: IntervalRecord) -> torch.Tensor:
         return torch.zeros_like(record.reward)
-
-
-def close_interval(
-    twin: DigitalTwin,
-    estimator: IVoIEstimator | None,
-    decide: Callable[[bool], torch.Tensor] | None,
-    perfect: bool = False,
-    commands: torch.Tensor | None = None,
-) -> IntervalRecord:
-    """Finish the twin's interval for ``estimator``: the followers' commands are ``commands``
-    or ``decide(False)`` (the acting policy on the observation of the actual CAMs); when the
-    estimator compares with a lost CAM (``needs_command_if_lost``), ``decide(True)`` (the same
-    policy on the observation had the CAMs been lost) is recorded too, and called first, so
-    that a stateful completer ends on the actual CAMs."""
-    command_if_lost = None
-    if not perfect and getattr(estimator, "needs_command_if_lost", False):
-        if decide is None:
-            raise ValueError(
-                "this IVoI estimator needs the command each follower would have taken had its "
-                "CAM been lost, which only a control module can give: the followers' commands "
-                "here come from the vehicle agents"
-            )
-        command_if_lost = decide(True)
-    if commands is None:
-        commands = decide(False)
-    return twin.finish_interval(commands, perfect, command_if_lost_mps2=command_if_lost)
 
 
 #: The named IVoI estimators, name → class with ``from_reference(reference, **options)``.

@@ -1,0 +1,162 @@
+"""The interval engine: the one place the interval protocol is written (vdtn_marl.core)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+import vdtn_marl
+from vdtn_marl.core.interval import IntervalEngine, check_burn_in, check_callable
+from vdtn_marl.envs.base import ENGINE_PARTS
+from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
+from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.completion import make_completion
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.sim.twin import DigitalTwin
+
+PACKAGE = Path(__file__).resolve().parents[2] / "vdtn_marl"
+#: the twin's interval calls: only the core (and the twin itself) make them
+PROTOCOL_CALLS = {"finish_interval", "begin_interval", "close_interval"}
+
+
+def _faces():
+    for env_id in vdtn_marl.list_envs():
+        yield env_id, lambda env_id=env_id: vdtn_marl.make(env_id, seed=0, episode_intervals=4)
+    for mode in MODES:
+        yield f"torchrl:{mode}", lambda mode=mode: VDTNTorchRLEnv(
+            mode=mode, batch_size=2, seed=0, episode_intervals=4, ivoi_estimator="none"
+        )
+
+
+FACES = dict(_faces())
+
+
+@pytest.mark.parametrize("face", sorted(FACES))
+def test_every_face_runs_on_an_engine_that_owns_its_parts(face):
+    env = FACES[face]()
+    assert isinstance(env.engine, IntervalEngine)
+    assert env.engine.twin is env.twin
+    for name, target in ENGINE_PARTS.items():
+        assert getattr(env, name) is getattr(env.engine, target)
+    # replacing a part on the face replaces what the engine runs
+    marker = make_completion("hold", None, env.twin.params.platoon)
+    env.completion = marker
+    assert env.engine.completion is marker
+    assert "completion" not in env.__dict__
+
+
+def test_no_module_outside_the_core_runs_the_interval_protocol():
+    offenders = []
+    for path in PACKAGE.rglob("*.py"):
+        room = path.relative_to(PACKAGE).parts[0]
+        if room in ("sim", "core"):
+            continue
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.Call):
+                func = node.func
+                name = func.attr if isinstance(func, ast.Attribute) else getattr(func, "id", "")
+                if name in PROTOCOL_CALLS:
+                    offenders.append(f"{path.relative_to(PACKAGE)}:{node.lineno} {name}")
+    assert not offenders, offenders
+
+
+def _engine(batch=4, seed=3, **kwargs):
+    params = TwinParams.from_overrides(episode_intervals=5)
+    twin = DigitalTwin(params, batch_size=batch, seed=seed, backend="torch")
+    twin.reset(seed=seed)
+    kwargs.setdefault("rra_policy", RandomRRAPolicy(params.radio.num_actions, seed))
+    kwargs.setdefault("control", CACCController(params.platoon))
+    return IntervalEngine(twin, perfect=False, **kwargs)
+
+
+def test_close_and_advance_run_an_episode_to_truncation():
+    engine = _engine()
+    engine.run_radio()
+    for k in range(5):
+        if k:
+            engine.advance()
+        assert engine.twin.subframe == engine.twin.subframes_per_interval
+        closed = engine.close()
+        assert closed.xi is None and closed.rra_reward is None  # no estimator, no reward
+        assert closed.record.reward.shape == (4, engine.twin.num_followers)
+        assert not bool(closed.terminated.any())
+        assert bool(closed.truncated.all()) == (k == 4)
+        assert bool((closed.going == ~closed.truncated).all())
+
+
+def test_advance_starts_only_the_going_scenarios():
+    engine = _engine()
+    engine.run_radio()
+    engine.close()
+    before = torch.as_tensor(engine.twin.link_state.remaining_bits).clone()
+    going = torch.tensor([True, False, True, False])
+    engine.advance(going)
+    after = torch.as_tensor(engine.twin.link_state.remaining_bits)
+    # the going scenarios got a new CAM and ran its radio; the others kept theirs
+    assert torch.equal(after[~going], before[~going])
+    assert not torch.equal(after[going], before[going])
+
+
+def test_the_engine_drives_the_radio_only_with_a_policy_and_a_radio():
+    assert _engine().drives_radio
+    assert not _engine(rra_policy=None).drives_radio
+    params = TwinParams.from_overrides(episode_intervals=5)
+    silent = IntervalEngine(
+        DigitalTwin(params, batch_size=1, seed=0, radio=False),
+        perfect=True,
+        rra_policy=RandomRRAPolicy(params.radio.num_actions, 0),
+    )
+    assert not silent.drives_radio
+    silent.twin.reset(seed=0)
+    silent.advance()  # starts the interval without touching a radio it has not got
+
+
+def test_the_cam_lost_command_is_asked_first_so_the_completer_ends_on_the_actual_cams():
+    calls = []
+
+    class Recording:
+        needs_command_if_lost = True
+
+        def __call__(self, twin, record):
+            calls.append("xi")
+            return torch.zeros(record.reward.shape)
+
+    class Control(CACCController):
+        def __call__(self, observation):
+            calls.append("decide")
+            return super().__call__(observation)
+
+    params = TwinParams.from_overrides(episode_intervals=5)
+    engine = _engine(control=Control(params.platoon), ivoi_estimator=Recording())
+    engine.run_radio()
+    closed = engine.close()
+    assert calls == ["decide", "decide", "xi"]
+    assert closed.record.command_if_lost_mps2 is not None
+
+
+def test_constructor_checks_name_the_key():
+    with pytest.raises(TypeError, match="rra_policy"):
+        check_callable("rra_policy", 3, "observations -> actions")
+    with pytest.raises(TypeError, match="control_module"):
+        _engine(control="cacc")
+    with pytest.raises(ConfigError, match="burn_in_intervals"):
+        check_burn_in(True, 10)
+    with pytest.raises(ConfigError, match="burn_in_intervals"):
+        check_burn_in(10, 10)
+    assert check_burn_in(9, 10) == 9
+
+
+def test_the_numpy_twin_takes_the_policy_actions_as_they_are():
+    env = vdtn_marl.make("vdtn/platoon-control-impaired-v1", seed=1, episode_intervals=3)
+    assert env.twin.backend == "numpy"
+    obs, _ = env.reset(seed=1)
+    assert env.twin.subframe == env.twin.subframes_per_interval  # the radio ran
+    action = {a: np.zeros(1, np.float32) for a in env.agents}
+    env.step(action)
+    assert env.twin.subframe == env.twin.subframes_per_interval
