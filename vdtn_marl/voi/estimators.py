@@ -23,7 +23,6 @@ from vdtn_marl.sim.platoon import (
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 from vdtn_marl.voi.rollout import (
     Policy,
-    _cacc_rollout_numpy,
     _check_rollout,
     _is_linear_cacc,
     _numpy_path,
@@ -191,8 +190,7 @@ class RolloutIVoIEstimator:
         u = u.reshape(branches * b, f)
         switch = switch.reshape(branches * b, f)
 
-        rollout = _cacc_rollout_numpy if lib is np else _rollout
-        returns, state, alive = rollout(
+        returns, state, alive = _rollout(
             twin, state, repeat_rows(interval, branches), policy,
             self.horizon_intervals, self.discount, u, switch, False,
         )  # fmt: skip

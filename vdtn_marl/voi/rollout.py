@@ -12,8 +12,6 @@ import torch
 from vdtn_marl.sim.backend import as_float, repeat_rows, to_numpy, to_torch
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.platoon import (
-    GAP_ERROR_BOUND_M,
-    SPEED_ERROR_BOUND_MPS,
     IntervalIntegrator,
     PlatoonState,
     control_reward,
@@ -66,16 +64,16 @@ def discounted_rollout(
     as it ends the environment's: the colliding interval's reward and penalty count, later
     intervals count zero. Returns (returns, final state).
 
-    On a NumPy twin with the linear CACC as ``policy`` the rollout runs on NumPy arrays
-    (:func:`_cacc_rollout_numpy`, the same numbers); inputs and results are torch tensors
-    either way."""
+    On a NumPy twin with the linear CACC as ``policy`` the rollout runs on NumPy arrays (the
+    same numbers, fewer per-call costs on a few scenarios); inputs and results are torch
+    tensors either way."""
     if not _numpy_path(twin, policy):
         returns, final, _ = _rollout(
             twin, state, interval, policy, horizon_intervals, discount,
             first_command, first_switch, stop_at_episode_end,
         )  # fmt: skip
         return returns, final
-    returns, final, _ = _cacc_rollout_numpy(
+    returns, final, _ = _rollout(
         twin,
         state.numpy(),
         to_numpy(interval),
@@ -121,9 +119,10 @@ def _rollout(
     first_switch=None,
     stop_at_episode_end: bool = False,
 ):
-    """:func:`discounted_rollout` on torch tensors or NumPy arrays (all inputs alike); for the
-    linear CACC on NumPy arrays, :func:`_cacc_rollout_numpy` computes the same faster.
-    Returns (returns [R, F], final state, alive [R]: 1 where no collision ended the row)."""
+    """:func:`discounted_rollout` on torch tensors or NumPy arrays (all inputs alike): the
+    twin's own integrator, the CACC law and the control reward, so there is one copy of the
+    physics. Returns (returns [R, F], final state, alive [R]: 1 where no collision ended the
+    row)."""
     pp = twin.params.platoon
     integrator: IntervalIntegrator = twin.integrator
     rows = interval.shape[0]
@@ -171,128 +170,6 @@ def _rollout(
         weight *= discount
         state = after
     return returns, state, alive
-
-
-def _cacc_rollout_numpy(
-    twin: DigitalTwin,
-    state: PlatoonState,
-    interval: np.ndarray,
-    policy: CACCController,
-    horizon_intervals: int,
-    discount: float,
-    first_command: np.ndarray | None,
-    first_switch: np.ndarray | None,
-    stop_at_episode_end: bool,
-) -> tuple[np.ndarray, PlatoonState]:
-    """:func:`_rollout` of the linear CACC on NumPy arrays, in fewer NumPy calls.
-
-    The generic loop composes :meth:`CACCController.perfect_command`,
-    :meth:`~vdtn_marl.sim.platoon.IntervalIntegrator.integrate`, ``spacing_errors`` and
-    ``control_reward``; on a few scenarios its cost is the number of NumPy calls. Here the
-    state stays packed as one [R, N, 3] array of (p, v, a) updated in place, the four clipped
-    CACC inputs and the four reward terms are each one [4, R, F] block, and the collision
-    penalty is added only when a gap closed (adding 0·penalty = −0 changes no value). Every
-    float32 operation of the generic loop is kept, in the same order, so the returns and the
-    final state are the same numbers.
-    """
-    pp = twin.params.platoon
-    f32 = np.float32
-    t = pp.subframes_per_interval
-    gain = twin.integrator._input_gain_np
-    phi_0, phi_1, phi_2 = (np.ascontiguousarray(c) for c in twin.integrator._phi_t_np.T)
-    rows, n = state.position_m.shape
-    f = n - 1
-    lo, hi = pp.accel_min_mps2, pp.accel_max_mps2
-    dt, lead_gain, length = (
-        pp.control_interval_s,
-        twin.integrator.leader_pos_gain,
-        pp.vehicle_length_m,
-    )
-    standstill, headway, penalty = pp.standstill_gap_m, pp.time_headway_s, pp.collision_penalty
-    # CACC law (perfect observation features 0, 1, 4, 2 with their clips)
-    law_lo = np.array([-GAP_ERROR_BOUND_M, -SPEED_ERROR_BOUND_MPS, lo, lo], f32)[:, None, None]
-    law_hi = np.array([GAP_ERROR_BOUND_M, SPEED_ERROR_BOUND_MPS, hi, hi], f32)[:, None, None]
-    # k_a enters negated: s + (−k_a)·x equals s − k_a·x exactly
-    gains = [policy.gap_gain, policy.speed_gain, policy.feedforward_gain, -policy.accel_gain]
-    law_gain = np.array(gains, f32)[:, None, None]
-    u_lo, u_hi = policy.params.accel_min_mps2, policy.params.accel_max_mps2
-    # the integrator clips u again; with the same bounds that is the identity, skip it
-    clip_again = (u_lo, u_hi) != (lo, hi)
-    # reward terms |e_p|/ê_p, α|e_v|/ê_v, β|u|/u_max, γ|jerk|/j_max (1·x is x exactly)
-    weight_terms = [1.0, pp.weight_speed, pp.weight_accel, pp.weight_jerk]
-    term_weight = np.array(weight_terms, f32)[:, None, None]
-    scales = [pp.gap_error_scale_m, pp.speed_error_scale_mps, pp.accel_max_mps2, pp.jerk_max_mps3]
-    term_scale = np.array(scales, f32)[:, None, None]
-
-    steps = np.arange(horizon_intervals)
-    leader = twin.leader_accel_mps2(interval[: twin.batch_size, None] + steps)
-    leader = repeat_rows(leader, rows // twin.batch_size)  # [R, H]
-    packed = np.empty((rows, n, 3), f32)  # (p, v, a) of every vehicle, leader first
-    packed[..., 0], packed[..., 1], packed[..., 2] = (
-        state.position_m,
-        state.speed_mps,
-        state.accel_mps2,
-    )
-    position, speed, z = packed[..., 0], packed[..., 1], packed[:, 1:]  # views
-    command = state.command_mps2
-    law = np.empty((4, rows, f), f32)  # clipped CACC inputs: e_p, e_v, û_{i−1}, a_i
-    gap = position[:, :-1] - position[:, 1:] - length
-    np.subtract(gap, standstill + headway * speed[:, 1:], out=law[0])
-    np.subtract(speed[:, :-1], speed[:, 1:], out=law[1])
-    law[2], law[3] = command[:, :-1], z[..., 2]
-    u_old = command[:, 1:]
-    terms = np.empty((4, rows, f), f32)
-    returns = np.zeros((rows, f), f32)
-    alive = np.ones(rows, f32)
-    g_all = gain[t]
-    weight = 1.0
-    for h in range(horizon_intervals):
-        if h == 0 and first_command is not None:
-            u = first_command
-            g_new = g_all if first_switch is None else gain[t - first_switch]
-        else:
-            np.minimum(np.maximum(law, law_lo, out=law), law_hi, out=law)
-            law *= law_gain
-            u = np.minimum(np.maximum(law[0] + law[1] + law[2] + law[3], u_lo), u_hi)
-            g_new = g_all
-        if h == 0 or clip_again:
-            u = np.minimum(np.maximum(u, lo), hi)
-        du = u - u_old
-        la = leader[:, h]
-        # leader: p + Δt·v + (its gain)·a, v + Δt·a clamped at 0 (read before overwriting)
-        lead_v = packed[:, 0, 1]
-        lead_p = packed[:, 0, 0] + dt * lead_v + lead_gain * la
-        packed[:, 0, 1] = np.maximum(lead_v + dt * la, 0.0)
-        packed[:, 0, 0], packed[:, 0, 2] = lead_p, la
-        # followers: z ← z·Φᵀ (torch's summation order) + G_T·u_{k−1} + G_{T−d}·(u_k − u_{k−1})
-        z_new = z[..., 0:1] * phi_0 + z[..., 1:2] * phi_1 + z[..., 2:3] * phi_2
-        z[...] = z_new + g_all * u_old[..., None] + g_new * du[..., None]
-        np.maximum(z[..., 1], 0.0, out=z[..., 1])
-        # spacing errors after the interval: the reward's and the next CACC input
-        gap = position[:, :-1] - position[:, 1:] - length
-        np.subtract(gap, standstill + headway * speed[:, 1:], out=law[0])
-        np.subtract(speed[:, :-1], speed[:, 1:], out=law[1])
-        terms[:2] = law[:2]
-        law[2, :, 0], law[2, :, 1:], law[3] = la, u[:, :-1], z[..., 2]
-        terms[2] = u
-        np.divide(du, dt, out=terms[3])
-        np.abs(terms, out=terms)
-        terms *= term_weight
-        terms /= term_scale
-        reward = -(terms[0] + terms[1] + terms[2] + terms[3])
-        collided = gap <= 0
-        if np.count_nonzero(collided):
-            reward = reward + collided.astype(f32) * penalty
-        if stop_at_episode_end:
-            reward = reward * (interval + h < twin.params.episode_intervals).astype(f32)[:, None]
-        returns = returns + weight * (reward * alive[:, None])
-        alive = alive * (~collided.any(-1)).astype(f32)
-        weight *= discount
-        u_old = u
-    command = np.empty((rows, n), f32)
-    command[:, 0], command[:, 1:] = leader[:, -1], u
-    final = PlatoonState(position.copy(), speed.copy(), packed[..., 2].copy(), command)
-    return returns, final, alive
 
 
 class RolloutValue:
