@@ -165,7 +165,7 @@ class ActingSystem(IntervalEngine):
         return close_interval(self.twin, estimator, self.decide)
 
     def begin(self) -> None:
-        self.twin.begin_interval()
+        self.advance(radio=False)  # the caller runs the subframes (run_subframes)
 
 
 def discounted_platoon_return(

@@ -142,7 +142,7 @@ def run(params: TwinParams, args, completion: str | None, predictor=None) -> dic
         hit = record.collided.any(-1) & alive
         collided |= hit
         alive &= ~hit
-        twin.begin_interval()
+        engine.advance(radio=False)  # the radio runs at the top of the loop
     if dev.type == "cuda":
         torch.cuda.synchronize(dev)
     out = {
