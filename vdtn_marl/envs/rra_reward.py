@@ -21,6 +21,7 @@ import torch
 from vdtn_marl.envs.base import check_kappa
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.link import SubframeOutcome
+from vdtn_marl.voi import make_ivoi_estimator
 
 REWARD_KINDS = ("jocc", "drra", "throughput")
 
@@ -72,3 +73,11 @@ class RRAReward:
         if self.kind == "drra":
             return -self.kappa2 * self.miss_penalty * cam_lost.float()
         return torch.zeros_like(ivoi)
+
+
+def paid_ivoi_estimator(reward_fn: RRAReward, ivoi_estimator, horizon_intervals: int):
+    """The IVoI estimator whose ξ ``reward_fn`` pays: ``ivoi_estimator`` (a name of
+    :data:`~vdtn_marl.voi.IVOI_ESTIMATORS`, ``"none"`` or an object; ``"rollout"`` over
+    ``horizon_intervals``) when the reward uses ξ, else ξ = 0 (nothing is estimated)."""
+    options = {"horizon_intervals": horizon_intervals} if ivoi_estimator == "rollout" else {}
+    return make_ivoi_estimator(ivoi_estimator if reward_fn.uses_ivoi else "none", **options)

@@ -50,14 +50,14 @@ from vdtn_marl.envs.base import (
     vehicle_observation_space,
 )
 from vdtn_marl.envs.policies import RandomRRAPolicy
-from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.envs.rra_reward import RRAReward, paid_ivoi_estimator
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
-from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+from vdtn_marl.voi import IVoIEstimator
 
 MODES = ("control", "control_impaired", "rra", "joint")
 
@@ -178,12 +178,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             reward_fn = RRAReward(
                 reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
             )
-            estimator_kwargs = (
-                {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
-            )
-            estimator = make_ivoi_estimator(
-                ivoi_estimator if reward_fn.uses_ivoi else "none", **estimator_kwargs
-            )
+            estimator = paid_ivoi_estimator(reward_fn, ivoi_estimator, ivoi_horizon_intervals)
         check_estimator_has_control(
             estimator,
             mode == "joint",

@@ -57,10 +57,10 @@ from vdtn_marl.envs.base import (
     vehicle_observation_space,
 )
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
-from vdtn_marl.envs.rra_reward import RRAReward
+from vdtn_marl.envs.rra_reward import RRAReward, paid_ivoi_estimator
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVoIEstimator, make_ivoi_estimator
+from vdtn_marl.voi import IVoIEstimator
 
 
 class TwoTimescaleEnv(VDTNParallelEnv):
@@ -90,12 +90,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )
         twin = self.twin
-        estimator_kwargs = (
-            {"horizon_intervals": ivoi_horizon_intervals} if ivoi_estimator == "rollout" else {}
-        )
-        estimator = make_ivoi_estimator(
-            ivoi_estimator if reward_fn.uses_ivoi else "none", **estimator_kwargs
-        )
+        estimator = paid_ivoi_estimator(reward_fn, ivoi_estimator, ivoi_horizon_intervals)
         self.vehicles_are_agents = vehicles_are_agents
         check_estimator_has_control(
             estimator,
