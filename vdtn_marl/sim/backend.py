@@ -14,7 +14,7 @@ Random draws always come from the twin's torch generator.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from typing import TypeAlias
 
 import numpy as np
@@ -159,3 +159,70 @@ def to_torch(x: np.ndarray | torch.Tensor) -> torch.Tensor:
         return torch.from_numpy(x)
     except ValueError:  # negative strides
         return torch.from_numpy(np.array(x))
+
+
+_DTYPES = {
+    "float32": (np.float32, torch.float32),
+    "int64": (np.int64, torch.long),
+    "bool": (np.bool_, torch.bool),
+}
+
+
+class ArrayNamespace:
+    """The array type a twin keeps its state in: NumPy arrays (``numpy=True``, CPU) or torch
+    tensors on ``device``. Arrays are made, converted and masked here, so the twin's code runs
+    without a branch per backend; conversions to and from torch are views (no copy)."""
+
+    def __init__(self, numpy: bool, device: torch.device):
+        self.numpy = numpy
+        self.device = device
+
+    @property
+    def lib(self):
+        """The array module: ``numpy`` or ``torch`` (a property: deep copies of a twin do not
+        copy modules)."""
+        return np if self.numpy else torch
+
+    def _dtype(self, name: str):
+        return _DTYPES[name][0 if self.numpy else 1]
+
+    def zeros(self, shape: tuple[int, ...], dtype: str = "float32") -> Array:
+        if self.numpy:
+            return np.zeros(shape, self._dtype(dtype))
+        return torch.zeros(shape, dtype=self._dtype(dtype), device=self.device)
+
+    def full(self, shape: tuple[int, ...], value, dtype: str = "float32") -> Array:
+        if self.numpy:
+            return np.full(shape, value, self._dtype(dtype))
+        return torch.full(shape, value, dtype=self._dtype(dtype), device=self.device)
+
+    def empty(self, shape: tuple[int, ...], dtype: str = "float32") -> Array:
+        if self.numpy:
+            return np.empty(shape, self._dtype(dtype))
+        return torch.empty(shape, dtype=self._dtype(dtype), device=self.device)
+
+    def native(self, x) -> Array:
+        """A torch tensor (or array) in this namespace: a NumPy view on the NumPy backend."""
+        return to_numpy(x) if self.numpy else x
+
+    def public(self, x) -> torch.Tensor:
+        """An array of this namespace as a torch tensor (sharing a NumPy array's memory)."""
+        return to_torch(x) if self.numpy else x
+
+    def copy(self, x: Array) -> Array:
+        return x.copy() if self.numpy else x.clone()
+
+    def mask(self, mask: torch.Tensor) -> Array:
+        """A bool mask given as a torch tensor, in this namespace (on the twin's device)."""
+        return mask.cpu().numpy() if self.numpy else mask.to(self.device)
+
+    def float32(self, x) -> Array:
+        """An input (torch tensor or array) as float32 in this namespace."""
+        if self.numpy:
+            return to_numpy(x).astype(np.float32, copy=False)
+        return torch.as_tensor(x).to(device=self.device, dtype=torch.float32)
+
+    def own_threads(self):
+        """Context of the twin's own torch calls: one intra-op thread on the NumPy backend
+        (:func:`single_intra_op_thread`)."""
+        return single_intra_op_thread() if self.numpy else nullcontext()

@@ -29,7 +29,13 @@ _LEAVES = (bool, int, float, str, type(None))
 
 def _skip(value: Any) -> bool:
     return isinstance(
-        value, torch.nn.Module | types.FunctionType | types.MethodType | type | enum.Enum
+        value,
+        torch.nn.Module
+        | types.FunctionType
+        | types.MethodType
+        | types.ModuleType
+        | type
+        | enum.Enum,
     )
 
 

@@ -21,14 +21,15 @@ same order as the torch path and the same draws from the same torch generator, s
 backends give the same numbers (:mod:`vdtn_marl.sim.backend`); a torch call per NumPy operation
 would cost several times more at B = 1. Public state attributes and return values stay torch
 tensors (CPU tensors sharing memory with those arrays); the interval tables, the link state and
-the RRA observation are NumPy arrays on this backend. The twin's own torch calls (draws, a few
-transcendental functions) run on one intra-op thread there, see
+the RRA observation are NumPy arrays on this backend. ``twin.ns``
+(:class:`~vdtn_marl.sim.backend.ArrayNamespace`) makes, converts and masks the arrays of the
+twin's backend, so the twin's code has few backend branches. The twin's own torch calls
+(draws, a few transcendental functions) run on one intra-op thread there, see
 :func:`~vdtn_marl.sim.backend.single_intra_op_thread`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 from dataclasses import dataclass
 
@@ -39,14 +40,13 @@ from vdtn_marl.data.traces import TraceSource, get_trace_source
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim import channel, link
 from vdtn_marl.sim.backend import (
+    ArrayNamespace,
     as_float,
     cat,
     clamp,
     mean_axis,
-    single_intra_op_thread,
     stack,
     to_numpy,
-    to_torch,
     xp,
 )
 from vdtn_marl.sim.layout import (
@@ -189,15 +189,16 @@ class DigitalTwin:
         self.integrator = IntervalIntegrator(pp, self.device)
         t = pp.subframes_per_interval  # fraction of the interval left at each subframe, [T]
         self._time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
-        self._numpy = backend == "numpy"
-        if self._numpy:
-            self._time_left = self._time_left.numpy()
+        #: the array type of the twin's state (NumPy arrays or torch tensors on the device)
+        self.ns = ns = ArrayNamespace(backend == "numpy", self.device)
+        self._numpy = ns.numpy
+        self._time_left = ns.native(self._time_left)
         self._decode_torch = link.ActionTables.build(rp, self.device)
         self._const_torch = link.KernelConstants.build(
             rp, pp.subframe_s, self.batch_size, self.num_links, self.device
         )
-        self._decode = self._decode_torch.numpy() if backend == "numpy" else self._decode_torch
-        self._const = self._const_torch.numpy() if backend == "numpy" else self._const_torch
+        self._decode = self._decode_torch.numpy() if ns.numpy else self._decode_torch
+        self._const = self._const_torch.numpy() if ns.numpy else self._const_torch
         self.seed(seed)
         self.reset()
 
@@ -213,7 +214,7 @@ class DigitalTwin:
 
     def _torch_calls(self):
         """Context of the twin's own torch calls: one intra-op thread on the NumPy backend."""
-        return single_intra_op_thread() if self._numpy else contextlib.nullcontext()
+        return self.ns.own_threads()
 
     def reset(self, seed: int | None = None, mask: torch.Tensor | None = None) -> None:
         """Start new episodes in all scenarios, or only where ``mask`` [B] is True."""
@@ -289,11 +290,11 @@ class DigitalTwin:
 
     def _native(self, x):
         """A state tensor in the backend's array type (a NumPy view on the NumPy backend)."""
-        return to_numpy(x) if self._numpy else x
+        return self.ns.native(x)
 
     def _public(self, x) -> torch.Tensor:
         """A backend array as a torch tensor (shares the NumPy array's memory)."""
-        return to_torch(x) if self._numpy else x
+        return self.ns.public(x)
 
     def _native_platoon(self) -> PlatoonState:
         return self.platoon.numpy() if self._numpy else self.platoon
@@ -329,10 +330,7 @@ class DigitalTwin:
             None if self._numpy else self.device,
         )
         obs = self._rra_observation_buffer(tables)
-        if self._numpy:
-            v2i_sum = np.zeros((self.batch_size, self.num_subchannels), np.float32)
-        else:
-            v2i_sum = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+        v2i_sum = self.ns.zeros((self.batch_size, self.num_subchannels))
         if mask is not None:
             tables, link_state, obs, v2i_sum = self._merge_interval(
                 mask, tables, link_state, obs, v2i_sum
@@ -385,7 +383,7 @@ class DigitalTwin:
         native = self._native
         x = native(self.platoon.position_m)
         moved = abs(x - native(self.shadow_position_m))
-        self.shadow_position_m = self._public(x.copy() if self._numpy else x.clone())
+        self.shadow_position_m = self._public(self.ns.copy(x))
         g = self.generator
         n = x.shape[1]
         # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends
@@ -443,10 +441,7 @@ class DigitalTwin:
         history = clamp(
             native(self.command_history) / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
         )
-        if self._numpy:
-            obs = np.empty((t, b, n_l, self.rra_obs_dim), np.float32)
-        else:
-            obs = torch.empty(t, b, n_l, self.rra_obs_dim, device=self.device)
+        obs = self.ns.empty((t, b, n_l, self.rra_obs_dim))
         obs[..., lay.csi] = csi
         obs[..., lay.occupancy] = 0.0
         obs[..., lay.bits_left] = 1.0
@@ -485,15 +480,14 @@ class DigitalTwin:
         outcome = link.subframe_step(self.tables, t, actions, state, self._decode, self._const)
         rate_sum = self._v2i_rate_sum + outcome.v2i_rate_bps
         if mask is not None:
-            xp = np if self.backend == "numpy" else torch
-            keep = mask.cpu().numpy() if self.backend == "numpy" else mask
+            lib, keep = self.ns.lib, self.ns.mask(mask)
             state = link.LinkState(
                 *(
-                    xp.where(keep[:, None], getattr(state, f.name), getattr(before, f.name))
+                    lib.where(keep[:, None], getattr(state, f.name), getattr(before, f.name))
                     for f in dataclasses.fields(state)
                 )
             )
-            rate_sum = xp.where(keep[:, None], rate_sum, self._v2i_rate_sum)
+            rate_sum = lib.where(keep[:, None], rate_sum, self._v2i_rate_sum)
         self.link_state, self._v2i_rate_sum = state, rate_sum
         self.subframe = t + 1
         return outcome
@@ -551,10 +545,7 @@ class DigitalTwin:
             )
         delay = self.link_state.delay_subframes
         lost = self.subframes_per_interval + 1
-        if self._numpy:
-            self.link_state.delay_subframes = np.where(mask.cpu().numpy(), lost, delay)
-        else:
-            self.link_state.delay_subframes = delay.masked_fill(mask.to(self.device), lost)
+        self.link_state.delay_subframes = self.ns.lib.where(self.ns.mask(mask), lost, delay)
 
     def _delivery_subframes(self):
         """CAM delivery subframes [B, L] in the backend's array type."""
@@ -571,17 +562,10 @@ class DigitalTwin:
 
     def _switch_subframe(self, perfect: bool):
         t = self.subframes_per_interval
-        if self._numpy:
-            if perfect:
-                return np.zeros((self.batch_size, self.num_followers), np.int64)
-            delay = self._delivery_subframes()
-            return np.where(delay <= t - 1, delay, t)
         if perfect:
-            return torch.zeros(
-                self.batch_size, self.num_followers, dtype=torch.long, device=self.device
-            )
-        delay = torch.as_tensor(self._delivery_subframes(), device=self.device)
-        return torch.where(delay <= t - 1, delay, torch.full_like(delay, t))
+            return self.ns.zeros((self.batch_size, self.num_followers), "int64")
+        delay = self._delivery_subframes()
+        return self.ns.lib.where(delay <= t - 1, delay, t)
 
     def vehicle_observation(self, perfect: bool, cams_lost: bool = False) -> torch.Tensor:
         """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5).
@@ -655,11 +639,7 @@ class DigitalTwin:
         native, public = self._native, self._public
         switch = self._switch_subframe(perfect)
         before = self._native_platoon()
-        if self._numpy:
-            u = to_numpy(commands_mps2).astype(np.float32, copy=False)
-        else:
-            u = commands_mps2.to(device=self.device, dtype=torch.float32)
-        u = clamp(u, pp.accel_min_mps2, pp.accel_max_mps2)
+        u = clamp(self.ns.float32(commands_mps2), pp.accel_min_mps2, pp.accel_max_mps2)
         if command_if_lost_mps2 is not None:
             if tuple(command_if_lost_mps2.shape) != expected:
                 raise ValueError(
@@ -679,8 +659,6 @@ class DigitalTwin:
         lib = xp(u)
         if self.radio_enabled:
             delay = self._delivery_subframes()
-            if not self._numpy:
-                delay = torch.as_tensor(delay, device=self.device)
             mean_rate = native(self._v2i_rate_sum) / max(self.subframe, 1)
             delivered = delay <= t
             self.cam_held = public(
@@ -691,10 +669,7 @@ class DigitalTwin:
             )
         else:
             delay = lib.zeros_like(switch)
-            if self._numpy:
-                mean_rate = np.zeros((self.batch_size, self.num_subchannels), np.float32)
-            else:
-                mean_rate = torch.zeros(self.batch_size, self.num_subchannels, device=self.device)
+            mean_rate = self.ns.zeros((self.batch_size, self.num_subchannels))
         # the recipients' histories the next interval's RRA observation reads
         delay_fraction = clamp(as_float(delay) / (t + 1), 0.0, 1.0)
         self.cam_delay_history = public(
@@ -709,7 +684,7 @@ class DigitalTwin:
             )
         )
         record = IntervalRecord(
-            interval=public(interval.copy() if self._numpy else interval.clone()),
+            interval=public(self.ns.copy(interval)),
             state_before=self.platoon,
             state_after=after.torch() if self._numpy else after,
             command_mps2=public(u),
