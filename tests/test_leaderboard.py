@@ -150,18 +150,18 @@ def test_aggregate_is_deterministic_and_ignores_missing_values():
 
 
 def test_aggregate_degenerate_samples():
-    one = leaderboard.aggregate([2.5])
-    assert (one["n"], one["mean"], one["ci_low"], one["ci_high"], one["std"]) == (
-        1, 2.5, 2.5, 2.5, 0.0,
-    )  # fmt: skip
+    for interval in leaderboard.INTERVALS:
+        # one run: its value, but no interval (a zero-width one would read as certainty)
+        one = leaderboard.aggregate([2.5], interval=interval)
+        assert (one["n"], one["mean"]) == (1, 2.5)
+        assert one["ci_low"] is one["ci_high"] is one["ci_method"] is one["std"] is None
+        # identical runs: an interval of zero width, whatever the method
+        same = leaderboard.aggregate([3.0] * 4, interval=interval)
+        assert same["ci_low"] == same["ci_high"] == same["mean"] == 3.0, interval
+        assert same["ci_method"] == interval
     same = leaderboard.aggregate([1.0] * 10)
     assert same["ci_low"] == same["ci_high"] == same["mean"] == same["iqm"] == 1.0
     assert same["iqm_ci_low"] == same["iqm_ci_high"] == 1.0
-    for interval in leaderboard.INTERVALS:  # zero width whatever the method
-        for values in ([2.5], [3.0] * 4):
-            stat = leaderboard.aggregate(values, interval=interval)
-            assert stat["ci_low"] == stat["ci_high"] == stat["mean"], (interval, values)
-            assert stat["ci_method"] == interval
     empty = leaderboard.aggregate([None, float("nan")])
     assert empty["n"] == 0 and all(empty[k] is None for k in leaderboard.STAT_KEYS if k != "n")
 
@@ -607,6 +607,9 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
                 assert stat["n"] == expected, (method, key)
                 if expected == 0:
                     assert stat["mean"] is None
+                    continue
+                if expected == 1:  # one run (a latency of one delivering run): no interval
+                    assert math.isfinite(stat["mean"]) and stat["ci_low"] is None, (method, key)
                     continue
                 for name in ("mean", "ci_low", "ci_high", "std"):
                     assert math.isfinite(stat[name]), (method, key, name)

@@ -201,9 +201,9 @@ def aggregate(
 ) -> dict[str, Any]:
     """Statistics of one metric across runs (non-finite values and None are left out):
     ``n``, ``mean`` with its ``interval`` CI ``ci_low``/``ci_high`` (``ci_method``: the
-    interval used), ``std`` (sample), and ``iqm`` with its bootstrap CI
-    ``iqm_ci_low``/``iqm_ci_high`` (``iqm_ci_method``) when n >= :data:`MIN_RUNS_FOR_IQM`
-    (else None)."""
+    interval used; None from one run), ``std`` (sample; None from one run), and ``iqm`` with
+    its bootstrap CI ``iqm_ci_low``/``iqm_ci_high`` (``iqm_ci_method``) when
+    n >= :data:`MIN_RUNS_FOR_IQM` (else None)."""
     import numpy as np
 
     _check_interval(interval)
@@ -212,13 +212,16 @@ def aggregate(
     out["n"] = len(x)
     if not x:
         return out
+    if len(x) == 1:  # one run: a mean, but no interval and no spread to report
+        out["mean"] = x[0]
+        return out
     if interval == "t":
         mean, low, high = t_ci(x, confidence)
         used = "t"
     else:
         mean, low, high, used = _bootstrap_ci(x, _mean, resamples, confidence, seed, interval)
     out.update(mean=mean, ci_low=low, ci_high=high, ci_method=used)
-    out["std"] = float(np.std(x, ddof=1)) if len(x) > 1 else 0.0
+    out["std"] = float(np.std(x, ddof=1))
     if len(x) >= MIN_RUNS_FOR_IQM:
         iqm, low, high, used = _bootstrap_ci(
             x, _iqm, resamples, confidence, seed, iqm_interval(interval)
