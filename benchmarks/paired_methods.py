@@ -16,6 +16,7 @@ round_robin:greedy,greedy:oracle          # writes results/paired_platoon4.json
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 import torch
@@ -72,7 +73,7 @@ def by_seed(rows: list[dict[str, str]], method: str, metric: str) -> dict[int, f
     for row in rows:
         if row["method"] == method and row.get(metric) not in (None, ""):
             value = float(row[metric])
-            if value == value and abs(value) != float("inf"):
+            if math.isfinite(value):
                 out[int(row["seed"])] = value
     return out
 

@@ -29,8 +29,11 @@ def _faces():
     for env_id in vdtn_marl.list_envs():
         yield env_id, lambda env_id=env_id: vdtn_marl.make(env_id, seed=0, episode_intervals=4)
     for mode in MODES:
-        yield f"torchrl:{mode}", lambda mode=mode: VDTNTorchRLEnv(
-            mode=mode, batch_size=2, seed=0, episode_intervals=4, ivoi_estimator="none"
+        yield (
+            f"torchrl:{mode}",
+            lambda mode=mode: VDTNTorchRLEnv(
+                mode=mode, batch_size=2, seed=0, episode_intervals=4, ivoi_estimator="none"
+            ),
         )
 
 
@@ -160,3 +163,17 @@ def test_the_numpy_twin_takes_the_policy_actions_as_they_are():
     action = {a: np.zeros(1, np.float32) for a in env.agents}
     env.step(action)
     assert env.twin.subframe == env.twin.subframes_per_interval
+
+
+@pytest.mark.parametrize(
+    "make, key",
+    [
+        (lambda: vdtn_marl.make("vdtn/platoon-control-impaired-v1", rra_policy=3), "rra_policy"),
+        (lambda: vdtn_marl.make("vdtn/v2x-rra-v1", control_module=3), "control_module"),
+        (lambda: VDTNTorchRLEnv(mode="control_impaired", rra_policy=3), "rra_policy"),
+        (lambda: VDTNTorchRLEnv(mode="rra", control_module=3), "control_module"),
+    ],
+)
+def test_every_face_refuses_a_part_that_is_not_callable_naming_it(make, key):
+    with pytest.raises(TypeError, match=key):
+        make()

@@ -135,8 +135,7 @@ class IntervalEngine:
         self.reward_fn = reward_fn
         self.validate_rra = validate_rra
         self._torch = twin.backend == "torch"
-        if twin.radio_enabled:
-            self._bandwidth_hz = twin.params.radio.subchannel_bandwidth_hz
+        self._bandwidth_hz = twin.params.radio.subchannel_bandwidth_hz
         self._subframe_s = twin.params.platoon.subframe_s
 
     @property
@@ -179,11 +178,13 @@ class IntervalEngine:
             twin.step_subframe(actions, validated=validated, mask=mask)
 
     def step_subframe(self, actions, validated: bool = True):
-        """One subframe with RRA ``actions`` [B, L]; returns (RRA reward [B, L], V2I
-        throughput [B] in Mbps) with a reward function, else the twin's outcome."""
-        outcome = self.twin.step_subframe(actions, validated=validated)
-        if self.reward_fn is None:
-            return outcome
+        """One subframe with RRA ``actions`` [B, L]: the twin's outcome
+        (:class:`~vdtn_marl.sim.link.SubframeOutcome`)."""
+        return self.twin.step_subframe(actions, validated=validated)
+
+    def subframe_reward(self, outcome):
+        """The reward function's (RRA reward [B, L], V2I throughput [B] in Mbps) of a
+        subframe's ``outcome``."""
         return self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
 
     # ------------------------------------------------------------------ observe and act

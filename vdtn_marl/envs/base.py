@@ -111,6 +111,7 @@ for _name, _target in ENGINE_PARTS.items():
         _name,
         property(lambda self, _t=_target: getattr(self.engine, _t), doc=f"the engine's {_target}"),
     )
+del _name, _target
 
 
 class VDTNParallelEnv(EngineBacked, ParallelEnv):

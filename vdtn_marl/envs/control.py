@@ -44,7 +44,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
-from vdtn_marl.core.interval import IntervalEngine, check_callable
+from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
     vehicle_action_space,
@@ -117,7 +117,6 @@ class PlatoonControlEnv(VDTNParallelEnv):
         self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
         self.agents: list[str] = []
         rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
-        check_callable("rra_policy", rra_policy, "observations [1, L, D] -> actions [1, L]")
         self.engine = IntervalEngine(  # with radio (impaired) it runs each interval's T subframes
             self.twin,
             perfect=not impaired,

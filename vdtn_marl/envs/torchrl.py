@@ -39,7 +39,6 @@ from torchrl.envs import EnvBase
 from vdtn_marl.core.interval import (
     IntervalEngine,
     check_burn_in,
-    check_callable,
     check_estimator_has_control,
 )
 from vdtn_marl.data.traces import TraceSource
@@ -161,9 +160,6 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         rra_policy_used = None
         if mode == "control_impaired":
             rra_policy_used = rra_policy or RandomRRAPolicy(self.num_actions, seed)
-            check_callable(
-                "rra_policy", rra_policy_used, "observations [B, L, D] -> actions [B, L]"
-            )
         elif rra_policy is not None:
             raise ConfigError(
                 f"rra_policy is only used with mode='control_impaired', not mode={mode!r}"
@@ -494,7 +490,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         commands = self._vehicle_commands(tensordict) if closing and self.has_vehicles else None
 
         engine = self.engine
-        rra_reward, _ = engine.step_subframe(rra_actions)
+        rra_reward, _ = engine.subframe_reward(engine.step_subframe(rra_actions))
         rra_reward = rra_reward.to(torch.float32)
         b = self.num_scenarios
         terminated = torch.zeros(b, dtype=torch.bool, device=self.device)

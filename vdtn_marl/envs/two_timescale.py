@@ -204,7 +204,10 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         if closes_interval and self.vehicles_are_agents:
             commands = torch.as_tensor(self._vehicle_commands(actions, self.vehicle_agents))[None]
 
-        reward, throughput = self.engine.step_subframe(self._to_twin(rra_actions))
+        engine = self.engine
+        reward, throughput = engine.subframe_reward(
+            engine.step_subframe(self._to_twin(rra_actions))
+        )
         rra_reward = self._as_numpy(reward)[0]
         throughput_mbps = float(throughput[0])
         vehicle_reward = [0.0] * twin.num_followers

@@ -30,12 +30,7 @@ _LEAVES = (bool, int, float, str, type(None))
 def _skip(value: Any) -> bool:
     return isinstance(
         value,
-        torch.nn.Module
-        | types.FunctionType
-        | types.MethodType
-        | types.ModuleType
-        | type
-        | enum.Enum,
+        torch.nn.Module | types.FunctionType | types.MethodType | type | enum.Enum,
     )
 
 
