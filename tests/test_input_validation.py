@@ -9,8 +9,8 @@ import pytest
 
 import vdtn_marl
 from vdtn_marl import cli
-from vdtn_marl.config import RunConfig, validate
 from vdtn_marl.data.profiles import load_train_eval_sources
+from vdtn_marl.experiment.config import RunConfig, validate
 from vdtn_marl.experiment.jocc import trace_sources
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.twin import resolve_device
@@ -210,7 +210,7 @@ def test_resolve_device_names_cpu_or_the_missing_cuda():
     [(["--kappa1", "2"], "kappa1=2.0 is outside"), (["--device", "foo"], "device='foo'")],
 )
 def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
-    from vdtn_marl.rollout import main
+    from vdtn_marl.cli.rollout import main
 
     with pytest.raises(SystemExit) as info:
         main(argv)
@@ -220,7 +220,7 @@ def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
 
 
 def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
-    from vdtn_marl.experiment.jocc import main
+    from vdtn_marl.experiment.api import main  # python -m vdtn_marl.experiment.jocc
 
     with pytest.raises(SystemExit) as info:
         main(["--kappa1", "2", "--run-dir", str(tmp_path / "run")])
@@ -230,7 +230,7 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
 
 
 def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkeypatch):
-    from vdtn_marl.experiment import jocc
+    from vdtn_marl.experiment import api  # python -m vdtn_marl.experiment.jocc
 
     run = tmp_path / "run"
     (run / "checkpoints").mkdir(parents=True)
@@ -243,8 +243,8 @@ def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkey
     def fail(*args, **kwargs):
         raise AssertionError("training started")
 
-    monkeypatch.setattr(jocc, "JointOptimisation", fail)
-    assert jocc.main(["--run-dir", str(run)]) == 2
+    monkeypatch.setattr(api, "jocc", fail)
+    assert api.main(["--run-dir", str(run)]) == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(lines) == 1, lines
     assert lines[0].startswith(f"error: --run-dir={run} already holds a run (config.yaml")
@@ -254,18 +254,15 @@ def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkey
         ["checkpoints", "last.pt", "summary.json", "config.yaml", "metrics.csv"]
     )
 
-    # --resume continues it: the loop is built (and resumes from checkpoints/last.pt itself)
+    # --resume continues it: the run starts (and resumes from checkpoints/last.pt itself)
     calls = []
 
-    class Resumed:
-        def __init__(self, cfg, run_dir):
-            calls.append((cfg.resume, run_dir))
+    def resumed(cfg, run_dir):
+        calls.append((cfg.resume, run_dir))
+        return {"control_cost": 1.0}
 
-        def run(self):
-            return {"control_cost": 1.0}
-
-    monkeypatch.setattr(jocc, "JointOptimisation", Resumed)
-    assert jocc.main(["--run-dir", str(run), "--resume"]) == 0
+    monkeypatch.setattr(api, "jocc", resumed)
+    assert api.main(["--run-dir", str(run), "--resume"]) == 0
     assert calls == [(True, str(run))]
 
 

@@ -12,5 +12,7 @@ warnings.warn(
     stacklevel=2,
 )
 if __name__ == "__main__":  # python -m vdtn_marl.algos.jocc
-    raise SystemExit(_moved.main())
+    from vdtn_marl.experiment.api import main
+
+    raise SystemExit(main())
 sys.modules[__name__] = _moved

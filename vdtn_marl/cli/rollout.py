@@ -16,9 +16,9 @@ import statistics
 import numpy as np
 
 import vdtn_marl
-from vdtn_marl.config import validate_device
 from vdtn_marl.envs.base import check_kappa
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.experiment.config import validate_device
 
 
 def run(intervals: int, seed: int, kappa1: float, device: str) -> dict[str, float]:

@@ -1,20 +1,20 @@
 """Helpers shared by the scripts in ``benchmarks/``: comma-separated option lists that fail
 with a message naming the flag and the value, the provenance block of a results JSON, means
-with their CIs, and the description of a measured checkpoint's run."""
+with their CIs, the description of a measured checkpoint's run and a console for tables.
+(The loops of trained checkpoints come from
+:func:`vdtn_marl.experiment.api.loaded_checkpoints`.)"""
 
 from __future__ import annotations
 
 import datetime as dt
 import platform
 import sys
-import tempfile
-from pathlib import Path
 
 import torch
 from rich.console import Console
 
 from vdtn_marl import __version__
-from vdtn_marl.runs import script_command
+from vdtn_marl.io.files import script_command
 from vdtn_marl.voi import mean_ci
 
 
@@ -80,29 +80,9 @@ def ci_summary(samples: torch.Tensor) -> dict[str, float | int]:
     return {"mean": mean, "low": low, "high": high, "n": int(finite.numel())}
 
 
-def loaded_checkpoints(paths, scratch_prefix: str, console=None):
-    """Yield (path, JOCC loop with every trainer loaded) per checkpoint, one after the other;
-    the loops write to a scratch directory removed at the end (nothing lands next to the
-    checkpoints). A bad checkpoint stops the script with its error."""
-    from vdtn_marl.algos.checkpoint import CheckpointError
-    from vdtn_marl.experiment.jocc import JointOptimisation
-
-    with tempfile.TemporaryDirectory(prefix=scratch_prefix) as scratch:
-        for number, path in enumerate(paths):
-            try:
-                loop = JointOptimisation.from_checkpoint(
-                    path, Path(scratch) / f"run{number}", needs_pi_tilde=True
-                )
-            except CheckpointError as err:
-                raise SystemExit(str(err)) from err
-            if console is not None:
-                console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
-            yield path, loop
-
-
 def checkpoint_run(path, cfg) -> dict:
     """What a results JSON says about a measured checkpoint: its path and its run's scenario,
-    seed, RRA reward and κ1 (``cfg``: the run's :class:`~vdtn_marl.config.RunConfig`)."""
+    seed, RRA reward and κ1 (``cfg``: the run's :class:`~vdtn_marl.experiment.config.RunConfig`)."""
     return {
         "checkpoint": str(path),
         "scenario": cfg.scenario.name,
