@@ -2,6 +2,8 @@
 types, devices and the small command-line tools. Each error names the value and what is allowed.
 """
 
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -220,7 +222,7 @@ def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
 
 
 def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
-    from vdtn_marl.experiment.api import main  # python -m vdtn_marl.experiment.jocc
+    from vdtn_marl.experiment.jocc import main
 
     with pytest.raises(SystemExit) as info:
         main(["--kappa1", "2", "--run-dir", str(tmp_path / "run")])
@@ -229,8 +231,22 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
     assert not (tmp_path / "run").exists()
 
 
+@pytest.mark.parametrize("module", ["vdtn_marl.experiment.jocc", "vdtn_marl.algos.jocc"])
+def test_python_m_jocc_keeps_its_flags(module, tmp_path):
+    """``python -m vdtn_marl.experiment.jocc`` (and its old path) still parses its flags."""
+    run = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-m", module, "--kappa1", "2", "--run-dir", str(run)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "rra.kappa1=2.0 is outside" in done.stderr and "Traceback" not in done.stderr
+    assert not run.exists()
+
+
 def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkeypatch):
-    from vdtn_marl.experiment import api  # python -m vdtn_marl.experiment.jocc
+    from vdtn_marl.experiment import jocc
 
     run = tmp_path / "run"
     (run / "checkpoints").mkdir(parents=True)
@@ -243,8 +259,8 @@ def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkey
     def fail(*args, **kwargs):
         raise AssertionError("training started")
 
-    monkeypatch.setattr(api, "jocc", fail)
-    assert api.main(["--run-dir", str(run)]) == 2
+    monkeypatch.setattr(jocc, "JointOptimisation", fail)
+    assert jocc.main(["--run-dir", str(run)]) == 2
     lines = [line for line in capsys.readouterr().err.splitlines() if line.strip()]
     assert len(lines) == 1, lines
     assert lines[0].startswith(f"error: --run-dir={run} already holds a run (config.yaml")
@@ -254,15 +270,18 @@ def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkey
         ["checkpoints", "last.pt", "summary.json", "config.yaml", "metrics.csv"]
     )
 
-    # --resume continues it: the run starts (and resumes from checkpoints/last.pt itself)
+    # --resume continues it: the loop is built (and resumes from checkpoints/last.pt itself)
     calls = []
 
-    def resumed(cfg, run_dir):
-        calls.append((cfg.resume, run_dir))
-        return {"control_cost": 1.0}
+    class Resumed:
+        def __init__(self, cfg, run_dir):
+            calls.append((cfg.resume, run_dir))
 
-    monkeypatch.setattr(api, "jocc", resumed)
-    assert api.main(["--run-dir", str(run), "--resume"]) == 0
+        def run(self):
+            return {"control_cost": 1.0}
+
+    monkeypatch.setattr(jocc, "JointOptimisation", Resumed)
+    assert jocc.main(["--run-dir", str(run), "--resume"]) == 0
     assert calls == [(True, str(run))]
 
 

@@ -12,7 +12,5 @@ warnings.warn(
     stacklevel=2,
 )
 if __name__ == "__main__":  # python -m vdtn_marl.algos.jocc
-    from vdtn_marl.experiment.api import main
-
-    raise SystemExit(main())
+    raise SystemExit(_moved.main())
 sys.modules[__name__] = _moved

@@ -1,6 +1,6 @@
 """A short random-policy rollout of ``vdtn/vdtn-joint-v1`` with a results table.
 
-    python -m vdtn_marl.rollout --intervals 40 --seed 0
+    vdtn-marl rollout --intervals 40 --seed 0      (or: python -m vdtn_marl.cli.rollout ...)
 
 Every RRA agent picks a uniformly random sub-channel × power level each subframe; every
 follower picks a uniformly random acceleration at its tick. The table reports the V2I

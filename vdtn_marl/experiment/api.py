@@ -7,16 +7,13 @@ continues an interrupted run from its last checkpoint. Each logs (logger
 ``vdtn_marl.experiment.api``) one line when it starts and one with its wall time and main
 metrics when it ends.
 
-Scripts get two more: :func:`main` (``python -m vdtn_marl.experiment.jocc``: one JOCC
-iteration with the default budgets) and :func:`loaded_checkpoints` (the loops of trained
-checkpoints, for the measurements in ``benchmarks/``).
+Scripts get one more: :func:`loaded_checkpoints` (the loops of trained checkpoints, for the
+measurements in ``benchmarks/``).
 """
 
 from __future__ import annotations
 
-import argparse
 import logging
-import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
@@ -25,10 +22,9 @@ from typing import Any
 
 from vdtn_marl.algos.checkpoint import load_checkpoint, untrained_policies
 from vdtn_marl.errors import CheckpointError, ConfigError
-from vdtn_marl.experiment import outputs
-from vdtn_marl.experiment.config import RunConfig, to_dict, validate, validate_device
+from vdtn_marl.experiment.config import RunConfig, to_dict, validate
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.io.files import SUMMARY_FILE, atomic_write_json, run_outputs
+from vdtn_marl.io.files import SUMMARY_FILE, atomic_write_json
 from vdtn_marl.io.log import metrics_line
 from vdtn_marl.reporting.tables import TABLE_METRICS
 
@@ -137,44 +133,3 @@ def loaded_checkpoints(
             if console is not None:
                 console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
             yield path, loop
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``python -m vdtn_marl.experiment.jocc``: one JOCC iteration (:func:`jocc`) with the
-    default small budgets, a few flags instead of the CLI's keys; prints the metrics."""
-    parser = argparse.ArgumentParser(
-        prog="python -m vdtn_marl.experiment.jocc",
-        description="One JOCC iteration with the default small budgets; prints the metrics.",
-    )
-    parser.add_argument(
-        "--run-dir",
-        default="runs/jocc",
-        help="output directory; one that already holds a run is refused unless --resume",
-    )
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--kappa1", type=float, default=0.5)
-    parser.add_argument("--device", default="cpu")
-    parser.add_argument(
-        "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"
-    )
-    args = parser.parse_args(argv)
-    cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
-    cfg.rra.kappa1 = args.kappa1
-    try:
-        validate(cfg)
-        validate_device(cfg.device)
-    except ConfigError as exc:
-        parser.error(str(exc))
-    found = run_outputs(args.run_dir)
-    if found and not args.resume:
-        # training afresh would overwrite its checkpoints and metrics (as the CLI refuses to)
-        print(
-            f"error: --run-dir={args.run_dir} already holds a run ({', '.join(found)}); "
-            "allowed: --resume to continue it, or another --run-dir",
-            file=sys.stderr,
-        )
-        return 2
-    summary = jocc(cfg, args.run_dir)
-    print(outputs.format_table(summary))
-    print(f"outputs: {Path(args.run_dir).resolve()}")
-    return 0

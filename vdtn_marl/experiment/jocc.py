@@ -26,13 +26,15 @@ and the run's summary are :mod:`.evaluate`'s; the files a run writes besides tho
 :mod:`.outputs`'.
 
 ``python -m vdtn_marl.experiment.jocc`` runs one JOCC iteration with the default small budgets
-(:func:`vdtn_marl.experiment.api.main`).
+(:func:`main`).
 """
 
 from __future__ import annotations
 
+import argparse
 import copy
 import logging
+import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -51,9 +53,15 @@ from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.experiment import checkpoint, outputs
-from vdtn_marl.experiment.config import RunConfig, validate
+from vdtn_marl.experiment.config import RunConfig, validate, validate_device
 from vdtn_marl.experiment.evaluate import ActingSystem, evaluate_stage, run_summary
-from vdtn_marl.io.files import EVALUATION_FILE, SUMMARY_FILE, atomic_write_json, run_lock
+from vdtn_marl.io.files import (
+    EVALUATION_FILE,
+    SUMMARY_FILE,
+    atomic_write_json,
+    run_lock,
+    run_outputs,
+)
 from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
 from vdtn_marl.io.log import logged_stage, progress
 from vdtn_marl.io.metrics import MetricsLog
@@ -333,7 +341,7 @@ class JointOptimisation:
                 bar.update(1)
                 bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
                 if interrupt_requested() and trainer.iteration < end:
-                    self.save()  # Ctrl-C: keep this iteration, then stop (runs.py)
+                    self.save()  # Ctrl-C: keep this iteration, then stop (io/interrupts.py)
                     check_interrupt()
                 if every and trainer.iteration < end and trainer.iteration % every == 0:
                     self.save()
@@ -494,7 +502,49 @@ class JointOptimisation:
         )
 
 
-if __name__ == "__main__":  # python -m vdtn_marl.experiment.jocc: one JOCC iteration
-    from vdtn_marl.experiment.api import main
+# --- python -m vdtn_marl.experiment.jocc ---------------------------------------------------
 
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m vdtn_marl.experiment.jocc``: one JOCC iteration with the default small
+    budgets, a few flags instead of the CLI's keys; prints the metrics."""
+    parser = argparse.ArgumentParser(
+        prog="python -m vdtn_marl.experiment.jocc",
+        description="One JOCC iteration with the default small budgets; prints the metrics.",
+    )
+    parser.add_argument(
+        "--run-dir",
+        default="runs/jocc",
+        help="output directory; one that already holds a run is refused unless --resume",
+    )
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--kappa1", type=float, default=0.5)
+    parser.add_argument("--device", default="cpu")
+    parser.add_argument(
+        "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"
+    )
+    args = parser.parse_args(argv)
+    cfg = RunConfig(seed=args.seed, device=args.device, resume=args.resume)
+    cfg.rra.kappa1 = args.kappa1
+    try:
+        validate(cfg)
+        validate_device(cfg.device)
+    except ConfigError as exc:
+        parser.error(str(exc))
+    found = run_outputs(args.run_dir)
+    if found and not args.resume:
+        # training afresh would overwrite its checkpoints and metrics (as the CLI refuses to)
+        print(
+            f"error: --run-dir={args.run_dir} already holds a run ({', '.join(found)}); "
+            "allowed: --resume to continue it, or another --run-dir",
+            file=sys.stderr,
+        )
+        return 2
+    summary = JointOptimisation(cfg, args.run_dir).run()
+    print(outputs.format_table(summary))
+    print(f"outputs: {Path(args.run_dir).resolve()}")
+    return 0
+
+
+if __name__ == "__main__":
     raise SystemExit(main())
