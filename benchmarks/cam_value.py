@@ -104,17 +104,18 @@ from rich.table import Table
 
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import bind_to_twin
-from vdtn_marl.benchmarking import (
+from vdtn_marl.core.interval import IntervalEngine, close_interval
+from vdtn_marl.experiment.api import loaded_checkpoints
+from vdtn_marl.experiment.evaluate import EVAL_SEED_OFFSET
+from vdtn_marl.experiment.jocc import JointOptimisation
+from vdtn_marl.io.files import atomic_write_json
+from vdtn_marl.reporting.benchmarking import (
     checkpoint_run,
     ci_summary,
-    loaded_checkpoints,
     provenance,
     table_console,
 )
-from vdtn_marl.core.interval import IntervalEngine, close_interval
-from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
-from vdtn_marl.results import pyplot_agg, save_figure
-from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.reporting.plots import pyplot_agg, save_figure
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
 RESULTS = Path("benchmarks/results/cam_value.json")

@@ -38,8 +38,7 @@ from rich.console import Console
 from rich.markup import escape
 from rich.table import Table
 
-from vdtn_marl.benchmarking import parse_numbers, parse_seeds, provenance
-from vdtn_marl.config import (
+from vdtn_marl.experiment.config import (
     AlgoConfig,
     ControlConfig,
     ExperimentConfig,
@@ -49,7 +48,8 @@ from vdtn_marl.config import (
     validate,
 )
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.io.files import atomic_write_json
+from vdtn_marl.reporting.benchmarking import parse_numbers, parse_seeds, provenance
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
 RESULTS = Path("benchmarks/results/ivoi_noise.json")

@@ -61,17 +61,18 @@ from rich.table import Table
 from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy
-from vdtn_marl.benchmarking import (
+from vdtn_marl.experiment.api import loaded_checkpoints
+from vdtn_marl.experiment.config import IVOI_ESTIMATORS
+from vdtn_marl.experiment.evaluate import EVAL_SEED_OFFSET
+from vdtn_marl.experiment.jocc import JointOptimisation
+from vdtn_marl.io.files import atomic_write_json
+from vdtn_marl.reporting.benchmarking import (
     checkpoint_run,
     ci_summary,
-    loaded_checkpoints,
     parse_names,
     provenance,
     table_console,
 )
-from vdtn_marl.config import IVOI_ESTIMATORS
-from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
-from vdtn_marl.runs import atomic_write_json
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi
 

@@ -23,8 +23,8 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from vdtn_marl.benchmarking import ci_summary, parse_names, provenance
-from vdtn_marl.runs import atomic_write_json, read_csv_rows
+from vdtn_marl.io.files import atomic_write_json, read_csv_rows
+from vdtn_marl.reporting.benchmarking import ci_summary, parse_names, provenance
 
 RESULTS_DIR = Path(__file__).parent / "results"
 METRICS = (

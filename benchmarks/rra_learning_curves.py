@@ -87,8 +87,8 @@ from vdtn_marl.algos.baselines import make_rra_baseline
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy
-from vdtn_marl.benchmarking import parse_names, parse_seeds, provenance, table_console
-from vdtn_marl.config import (
+from vdtn_marl.data import trace_source_names
+from vdtn_marl.experiment.config import (
     AlgoConfig,
     ControlConfig,
     ExperimentConfig,
@@ -97,9 +97,10 @@ from vdtn_marl.config import (
     ScenarioConfig,
     validate,
 )
-from vdtn_marl.data import trace_source_names
-from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
-from vdtn_marl.runs import atomic_write_json, read_json
+from vdtn_marl.experiment.evaluate import EVAL_SEED_OFFSET
+from vdtn_marl.experiment.jocc import JointOptimisation
+from vdtn_marl.io.files import atomic_write_json, read_json
+from vdtn_marl.reporting.benchmarking import parse_names, parse_seeds, provenance, table_console
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import mean_ci
 
@@ -479,7 +480,7 @@ def plot(
 ) -> Path:
     """One panel per metric of :data:`LABELS`: one line per method × credit (seed mean, 95 %
     t band, clipped to the metric's range) and the RRA baselines as horizontal lines."""
-    from vdtn_marl.results import pyplot_agg, save_figure
+    from vdtn_marl.reporting.plots import pyplot_agg, save_figure
 
     plt = pyplot_agg()
     fig, axes = plt.subplots(2, 2, figsize=(12, 8), dpi=120)

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from vdtn_marl.runs import atomic_write_json, script_command
+from vdtn_marl.io.files import atomic_write_json, script_command
 
 TARGET_ENV_SUBFRAMES_PER_S = 10_000.0
 TARGET_CORE_AGENT_STEPS_PER_S = 1_000_000.0

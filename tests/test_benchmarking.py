@@ -8,7 +8,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from vdtn_marl.benchmarking import (
+from vdtn_marl.experiment.config import RunConfig
+from vdtn_marl.reporting.benchmarking import (
     checkpoint_run,
     ci_summary,
     parse_names,
@@ -16,7 +17,6 @@ from vdtn_marl.benchmarking import (
     parse_seeds,
     provenance,
 )
-from vdtn_marl.config import RunConfig
 
 
 def test_parse_names():

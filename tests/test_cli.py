@@ -24,9 +24,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from vdtn_marl import cli, config
+from vdtn_marl import cli
 from vdtn_marl.cli import help as cli_help
 from vdtn_marl.cli import prepass as cli_prepass
+from vdtn_marl.experiment import config
 
 # Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli/app.py).
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
@@ -47,7 +48,8 @@ if os.environ.get("VDTN_MARL_FAKE_API"):
     def _patch(api):
         from pathlib import Path
 
-        from vdtn_marl.runs import CHECKPOINT_DIR, SUMMARY_FILE, MetricsLog, atomic_write_json
+        from vdtn_marl.io.files import CHECKPOINT_DIR, SUMMARY_FILE, atomic_write_json
+        from vdtn_marl.io.metrics import MetricsLog
 
         def _fake(cfg, run_dir):
             run_dir = Path(run_dir)
@@ -342,7 +344,7 @@ def test_group_options_as_documented():
 def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
     from hydra import compose, initialize_config_module
 
-    from vdtn_marl.config import ScenarioConfig, register_configs
+    from vdtn_marl.experiment.config import ScenarioConfig, register_configs
     from vdtn_marl.sim.params import TwinParams
 
     register_configs()
@@ -575,7 +577,8 @@ def test_bench_summarize_of_empty_or_missing_dir_fails_clearly(tmp_path):
 
 def test_bench_summarize_lists_jobs_in_job_number_order(tmp_path):
     """Hydra numbers a sweep's jobs 0..N-1: job 10 comes after job 9, not after job 1."""
-    from vdtn_marl.results import find_jobs, summarize_sweep
+    from vdtn_marl.reporting.sweep import summarize_sweep
+    from vdtn_marl.reporting.tables import find_jobs
 
     sweep = tmp_path / "sweep"
     for job in range(12):
@@ -593,7 +596,7 @@ def test_bench_summarize_lists_jobs_in_job_number_order(tmp_path):
 
 
 def test_pareto_mask():
-    from vdtn_marl.results import pareto_mask
+    from vdtn_marl.reporting.plots import pareto_mask
 
     # (cost, throughput): the second point is beaten by the first on both.
     assert pareto_mask([1.0, 2.0, 3.0, 0.5], [1.0, 0.5, 2.0, 0.2]) == [True, False, True, True]
@@ -603,8 +606,8 @@ def test_default_config_mirrors_the_dataclass_defaults():
     """conf/ with its default options composes to RunConfig() exactly (no silent drift)."""
     from hydra import compose, initialize_config_module
 
-    from vdtn_marl.config import RunConfig, register_configs, to_dict
-    from vdtn_marl.results import flatten
+    from vdtn_marl.experiment.config import RunConfig, register_configs, to_dict
+    from vdtn_marl.reporting.tables import flatten
 
     register_configs()
     with initialize_config_module(config_module="vdtn_marl.conf", version_base="1.3"):

@@ -36,9 +36,9 @@ def test_envs_json(capsys):
 
 def test_rollout_forwards_all_arguments(monkeypatch):
     seen = []
-    fake = types.ModuleType("vdtn_marl.rollout")
+    fake = types.ModuleType("vdtn_marl.cli.rollout")
     fake.main = lambda argv: seen.append(list(argv)) or 0
-    monkeypatch.setitem(sys.modules, "vdtn_marl.rollout", fake)
+    monkeypatch.setitem(sys.modules, "vdtn_marl.cli.rollout", fake)
     assert cli.main(["rollout", "--env", "vdtn/v2x-rra-v1", "--help"]) == 0
     assert seen == [["--env", "vdtn/v2x-rra-v1", "--help"]]
 

@@ -28,7 +28,7 @@ pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigSt
 def _compose(overrides: list[str]) -> dict:
     from hydra import initialize_config_module
 
-    from vdtn_marl.config import register_configs
+    from vdtn_marl.experiment.config import register_configs
 
     register_configs()
     with initialize_config_module(config_module=cli_help.CONFIG_PACKAGE, version_base="1.3"):
@@ -419,7 +419,7 @@ def test_the_run_log_has_start_checkpoints_and_final_metrics(
 
 
 def test_logged_stage_logs_start_and_end_with_wall_time(caplog):
-    from vdtn_marl.runs import logged_stage
+    from vdtn_marl.io.log import logged_stage
 
     with caplog.at_level(logging.INFO, logger="vdtn_marl"):
         with logged_stage("control_perfect", "π* for 4 PPO iterations", 2):

@@ -22,14 +22,9 @@ import torch
 import vdtn_marl
 from vdtn_marl.algos.checkpoint import load_checkpoint
 from vdtn_marl.data.traces import TraceInfo
+from vdtn_marl.errors import RunFileError, RunWriteError
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.runs import (
-    LOCK_FILE,
-    RunFileError,
-    RunWriteError,
-    atomic_write_text,
-    run_lock,
-)
+from vdtn_marl.io.files import LOCK_FILE, atomic_write_text, run_lock
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200", "OMP_NUM_THREADS": "1"}
@@ -117,9 +112,9 @@ def test_a_full_disk_is_one_clear_line_and_the_run_continues_after(tmp_path, mon
     how to continue, exit 1, every file whole, nothing temporary left; then the run continues
     to its end."""
     from vdtn_marl import cli
-    from vdtn_marl import runs as runs_module
+    from vdtn_marl.io import files as files_module
 
-    real, calls = runs_module.os.fsync, [0]
+    real, calls = files_module.os.fsync, [0]
 
     def fsync(fd):
         calls[0] += 1
@@ -127,7 +122,7 @@ def test_a_full_disk_is_one_clear_line_and_the_run_continues_after(tmp_path, mon
             raise OSError(errno.ENOSPC, "No space left on device")
         real(fd)
 
-    monkeypatch.setattr(runs_module.os, "fsync", fsync)
+    monkeypatch.setattr(files_module.os, "fsync", fsync)
     monkeypatch.chdir(tmp_path)
     run = tmp_path / "run"
     with pytest.raises(SystemExit) as info:
@@ -139,20 +134,20 @@ def test_a_full_disk_is_one_clear_line_and_the_run_continues_after(tmp_path, mon
     assert "continue with: " in err[0] and "resume=true" in err[0], err
     _assert_whole(run)
     assert not list(run.rglob("*.tmp"))
-    monkeypatch.setattr(runs_module.os, "fsync", real)
+    monkeypatch.setattr(files_module.os, "fsync", real)
     assert cli.main([*RUN, f"hydra.run.dir={run}", "resume=true"]) == 0
     _assert_whole(run)
 
 
 def test_a_failed_write_keeps_the_previous_version(tmp_path, monkeypatch):
-    from vdtn_marl import runs as runs_module
+    from vdtn_marl.io import files as files_module
 
     path = atomic_write_text(tmp_path / "summary.json", '{"old": 1}\n')
 
     def full(fd):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(runs_module.os, "fsync", full)
+    monkeypatch.setattr(files_module.os, "fsync", full)
     with pytest.raises(RunWriteError, match="summary.json: No space left on device") as info:
         atomic_write_text(path, '{"new": 2}\n')
     assert info.value.errno == errno.ENOSPC and "previous version is intact" in str(info.value)
@@ -164,7 +159,7 @@ def test_a_failed_write_keeps_the_previous_version(tmp_path, monkeypatch):
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):
-    from vdtn_marl.config import (
+    from vdtn_marl.experiment.config import (
         AlgoConfig,
         ControlConfig,
         ExperimentConfig,
@@ -276,7 +271,7 @@ def test_the_run_lock_is_reentrant_in_a_process_and_released_after(tmp_path):
         pid = (tmp_path / LOCK_FILE).read_text().strip()
         assert pid == str(os.getpid())
     code = (
-        "import sys; from vdtn_marl.runs import run_lock\n"
+        "import sys; from vdtn_marl.io.files import run_lock\n"
         "with run_lock(sys.argv[1]): print('got it')\n"
     )
     done = subprocess.run(

@@ -2,6 +2,8 @@
 types, devices and the small command-line tools. Each error names the value and what is allowed.
 """
 
+import subprocess
+import sys
 from dataclasses import replace
 
 import numpy as np
@@ -9,8 +11,8 @@ import pytest
 
 import vdtn_marl
 from vdtn_marl import cli
-from vdtn_marl.config import RunConfig, validate
 from vdtn_marl.data.profiles import load_train_eval_sources
+from vdtn_marl.experiment.config import RunConfig, validate
 from vdtn_marl.experiment.jocc import trace_sources
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.twin import resolve_device
@@ -210,7 +212,7 @@ def test_resolve_device_names_cpu_or_the_missing_cuda():
     [(["--kappa1", "2"], "kappa1=2.0 is outside"), (["--device", "foo"], "device='foo'")],
 )
 def test_rollout_tool_rejects_bad_flags_in_one_line(argv, fragment, capsys):
-    from vdtn_marl.rollout import main
+    from vdtn_marl.cli.rollout import main
 
     with pytest.raises(SystemExit) as info:
         main(argv)
@@ -227,6 +229,20 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
     assert info.value.code == 2
     assert "rra.kappa1=2.0 is outside" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("module", ["vdtn_marl.experiment.jocc", "vdtn_marl.algos.jocc"])
+def test_python_m_jocc_keeps_its_flags(module, tmp_path):
+    """``python -m vdtn_marl.experiment.jocc`` (and its old path) still parses its flags."""
+    run = tmp_path / "run"
+    done = subprocess.run(
+        [sys.executable, "-m", module, "--kappa1", "2", "--run-dir", str(run)],
+        capture_output=True,
+        text=True,
+    )
+    assert done.returncode == 2, done.stderr
+    assert "rra.kappa1=2.0 is outside" in done.stderr and "Traceback" not in done.stderr
+    assert not run.exists()
 
 
 def test_jocc_module_refuses_a_run_dir_that_holds_a_run(tmp_path, capsys, monkeypatch):

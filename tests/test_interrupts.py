@@ -1,6 +1,6 @@
 """Ctrl-C with real signals: a run stops at a safe point with exit code 130 and a one-line hint,
 never a traceback, wherever the signal lands; the hint's command continues the run; a second
-Ctrl-C stops at once (vdtn_marl.runs.graceful_interrupts)."""
+Ctrl-C stops at once (vdtn_marl.io.interrupts.graceful_interrupts)."""
 
 from __future__ import annotations
 
@@ -91,7 +91,7 @@ def test_the_hint_continues_an_interrupted_run_to_its_end(tmp_path):
 def test_a_second_ctrl_c_stops_at_once_with_the_hint():
     code = (
         "import os, signal, time\n"
-        "from vdtn_marl.runs import graceful_interrupts, interrupt_requested\n"
+        "from vdtn_marl.io.interrupts import graceful_interrupts, interrupt_requested\n"
         "with graceful_interrupts(lambda: 'HINT'):\n"
         "    os.kill(os.getpid(), signal.SIGINT)\n"
         "    time.sleep(0.2)\n"
@@ -110,7 +110,7 @@ def test_a_second_ctrl_c_stops_at_once_with_the_hint():
 
 
 def test_outside_the_handler_ctrl_c_is_an_ordinary_keyboard_interrupt():
-    from vdtn_marl.runs import check_interrupt, graceful_interrupts, interrupt_requested
+    from vdtn_marl.io.interrupts import check_interrupt, graceful_interrupts, interrupt_requested
 
     before = signal.getsignal(signal.SIGINT)
     with graceful_interrupts():
@@ -126,7 +126,7 @@ def test_outside_the_handler_ctrl_c_is_an_ordinary_keyboard_interrupt():
 def test_nested_blocks_keep_a_ctrl_c_of_the_outer_one():
     """The CLI's block covers the config checks, the job's block the run: a Ctrl-C pressed
     before the job starts is still seen (and acted on) inside it."""
-    from vdtn_marl.runs import check_interrupt, graceful_interrupts, interrupt_requested
+    from vdtn_marl.io.interrupts import check_interrupt, graceful_interrupts, interrupt_requested
 
     before = signal.getsignal(signal.SIGINT)
     with graceful_interrupts(lambda: "outer"):

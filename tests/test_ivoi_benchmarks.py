@@ -10,7 +10,7 @@ from types import SimpleNamespace
 import pytest
 import torch
 
-from vdtn_marl.config import (
+from vdtn_marl.experiment.config import (
     AlgoConfig,
     ControlConfig,
     ExperimentConfig,

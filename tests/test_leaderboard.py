@@ -16,11 +16,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vdtn_marl import cli, config, leaderboard
+from vdtn_marl import cli, leaderboard
 from vdtn_marl.cli import help as cli_help
-from vdtn_marl.config import ConfigError
+from vdtn_marl.experiment import config
 from vdtn_marl.experiment.compose import hydra_compose
-from vdtn_marl.runs import RAW_EVALUATION_FILE
+from vdtn_marl.experiment.config import ConfigError
+from vdtn_marl.io.files import RAW_EVALUATION_FILE
 
 pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import subprocess
 import sys
 import textwrap
 import uuid
@@ -10,7 +11,7 @@ import warnings
 import pytest
 
 import vdtn_marl
-from vdtn_marl import registry
+from vdtn_marl.envs import registration as registry
 
 NS = "vdtntest"
 
@@ -332,3 +333,18 @@ def test_broken_plugin_warns_and_registry_keeps_working(plugin_env):
     with warnings.catch_warnings():
         warnings.simplefilter("error", vdtn_marl.PluginLoadWarning)
         vdtn_marl.list_envs()
+
+
+def test_the_package_and_its_registry_import_neither_torch_nor_the_simulator():
+    """``import vdtn_marl``, ``list_envs`` and ``spec`` stay light: the environments' modules
+    load on ``make`` only (a fresh interpreter, as this one has torch already)."""
+    code = (
+        "import sys, vdtn_marl\n"
+        "assert 'vdtn/vdtn-joint-v1' in vdtn_marl.list_envs()\n"
+        "vdtn_marl.spec('vdtn/vdtn-joint-v1')\n"
+        "print(sorted(m for m in ('torch', 'numpy', 'vdtn_marl.sim', 'vdtn_marl.envs.control')"
+        " if m in sys.modules))\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"

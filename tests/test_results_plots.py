@@ -1,4 +1,4 @@
-"""Plot helpers of vdtn_marl.results that the end-to-end CLI tests cannot check by eye."""
+"""Plot and table helpers of vdtn_marl.reporting that the end-to-end CLI tests cannot check."""
 
 import matplotlib
 
@@ -6,7 +6,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import pytest  # noqa: E402
 
-from vdtn_marl.results import _label_points  # noqa: E402
+from vdtn_marl.reporting.plots import _label_points  # noqa: E402
 
 
 def _offsets(xs, ys):
@@ -38,11 +38,11 @@ def test_the_summary_table_never_cuts_a_long_value():
 
     from rich.console import Console
 
-    from vdtn_marl import results
+    from vdtn_marl.reporting.tables import print_summary
 
     path = "/very/long/folder/of/runs/" + "x" * 90 + "/checkpoints/last.pt"
     out = io.StringIO()
-    results.print_summary({"checkpoint": path, "seed": 3}, console=Console(file=out, width=60))
+    print_summary({"checkpoint": path, "seed": 3}, console=Console(file=out, width=60))
     text = out.getvalue()
     assert "…" not in text
     joined = re.sub(r"[\s│┃|]", "", text)

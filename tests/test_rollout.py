@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from vdtn_marl.rollout import main, print_table, run
+from vdtn_marl.cli.rollout import main, print_table, run
 
 
 def test_rollout_reports_every_metric():

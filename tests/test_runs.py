@@ -8,7 +8,7 @@ import types
 
 import pytest
 
-from vdtn_marl.runs import MetricsLog
+from vdtn_marl.io.metrics import MetricsLog
 
 
 class _FakeWriter:

@@ -9,7 +9,7 @@ resource allocation in a Vehicular Digital Twin Network.
 
 from importlib import metadata as _metadata
 
-from vdtn_marl.registry import (
+from vdtn_marl.envs.registration import (
     DeprecatedEnvError,
     EnvSpec,
     PluginLoadWarning,

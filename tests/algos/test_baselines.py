@@ -394,7 +394,7 @@ def test_every_registered_control_baseline_drives_the_twin(name):
     ones a run may act with have their conf/control YAML."""
     import yaml
 
-    from vdtn_marl.config import CONTROLS
+    from vdtn_marl.experiment.config import CONTROLS
 
     params = TwinParams.from_overrides(episode_intervals=5)
     twin = DigitalTwin(params, batch_size=2, seed=1, radio=False)

@@ -8,8 +8,14 @@ import torch
 from vdtn_marl.algos.baselines import OracleController
 from vdtn_marl.algos.imitation import DistillationStats, distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import PPOTrainer
-from vdtn_marl.config import AlgoConfig, ControlConfig, ExperimentConfig, RunConfig, ScenarioConfig
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.config import (
+    AlgoConfig,
+    ControlConfig,
+    ExperimentConfig,
+    RunConfig,
+    ScenarioConfig,
+)
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams

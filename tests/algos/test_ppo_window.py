@@ -9,8 +9,8 @@ import io
 import torch
 
 from vdtn_marl.algos.ppo import PPOTrainer
-from vdtn_marl.config import AlgoConfig
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.config import AlgoConfig
 
 ALGO = AlgoConfig(rra_num_envs=4, rra_rollout_steps=30, minibatch_size=64, epochs=1)
 EPISODE_INTERVALS = 3  # 150 subframes

@@ -13,7 +13,8 @@ from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.networks import scalers
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.algos.trainer import ALGORITHMS, Trainer, trainer_class
-from vdtn_marl.config import (
+from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.config import (
     AlgoConfig,
     ControlConfig,
     ExperimentConfig,
@@ -23,9 +24,8 @@ from vdtn_marl.config import (
     to_dict,
     validate,
 )
-from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.runs import read_csv_rows
+from vdtn_marl.io.files import read_csv_rows
 from vdtn_marl.sim.layout import RRAFeatureLayout
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
@@ -488,7 +488,7 @@ def test_burned_in_is_refused_outside_rra_mode_and_range(tmp_path):
 
 
 def test_a_saved_config_without_newer_keys_keeps_the_behaviour_it_was_run_with():
-    from vdtn_marl.config import ABSENT_KEY_BEHAVIOUR, from_saved_dict
+    from vdtn_marl.experiment.config import ABSENT_KEY_BEHAVIOUR, from_saved_dict
 
     saved = to_dict(RunConfig())
     for group, key in ABSENT_KEY_BEHAVIOUR:

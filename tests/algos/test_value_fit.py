@@ -10,8 +10,8 @@ from test_training import TINY_ALGO, TINY_EXPERIMENT, tiny_config  # the tiny ru
 
 from vdtn_marl.algos.ppo import CriticValue, PPOTrainer
 from vdtn_marl.algos.value_fit import fit_critic
-from vdtn_marl.config import ConfigError, RRAConfig, validate
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+from vdtn_marl.experiment.config import ConfigError, RRAConfig, validate
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import perfect_observation

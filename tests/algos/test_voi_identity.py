@@ -202,7 +202,7 @@ def test_every_registered_estimator_gives_the_reference_policy_zero_advantage(na
     commands on perfect observations, and the config accepts the name."""
     from dataclasses import replace
 
-    from vdtn_marl.config import RunConfig, validate
+    from vdtn_marl.experiment.config import RunConfig, validate
 
     params = TwinParams.from_overrides(episode_intervals=INTERVALS)
     cacc = CACCController(params.platoon)

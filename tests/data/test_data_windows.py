@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 import torch
 
-from vdtn_marl.config import RunConfig, ScenarioConfig, validate
 from vdtn_marl.data import (
     DisjointWindowSource,
     ProfileTraceSource,
@@ -23,6 +22,7 @@ from vdtn_marl.data.selection import (
     file_sources,
     named_sources,
 )
+from vdtn_marl.experiment.config import RunConfig, ScenarioConfig, validate
 from vdtn_marl.sim.params import ConfigError
 
 DT = 0.05

@@ -281,7 +281,7 @@ def test_config_and_environment_accept_the_same_kappa_sums(kappa2, accepted):
     """κ1 + κ2 = 1 up to one shared tolerance: a pair the config accepts builds the env."""
     from dataclasses import replace
 
-    from vdtn_marl.config import RunConfig, validate
+    from vdtn_marl.experiment.config import RunConfig, validate
 
     cfg = RunConfig()
     cfg = replace(cfg, rra=replace(cfg.rra, kappa1=0.3, kappa2=kappa2))

@@ -20,7 +20,7 @@ import torch
 
 from vdtn_marl.envs.rra_reward import REWARD_KINDS as LEARNED_RRA
 from vdtn_marl.errors import CheckpointError
-from vdtn_marl.runs import atomic_write_bytes
+from vdtn_marl.io.files import atomic_write_bytes
 
 _log = logging.getLogger(__name__)
 

@@ -20,7 +20,7 @@ import torch
 from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.policies import RandomRRAPolicy
-from vdtn_marl.runs import check_interrupt
+from vdtn_marl.io.interrupts import check_interrupt
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import IVoIEstimator
@@ -188,7 +188,7 @@ def evaluate_system(
     if radio:
         engine.run_radio()
     for k in range(intervals):
-        check_interrupt()  # Ctrl-C stops here, between intervals (vdtn_marl.runs)
+        check_interrupt()  # Ctrl-C stops here, between intervals (vdtn_marl.io.interrupts)
         if k > 0:
             engine.advance()  # every scenario (a collided one is no longer counted)
         closed = engine.close()

@@ -1,5 +1,5 @@
 """Hyper-parameters of the trainers: :class:`AlgoConfig` (MAPPO/IPPO), the ``algo`` group of
-the experiment schema (:mod:`vdtn_marl.config` validates it and re-exports it)."""
+the experiment schema (:mod:`vdtn_marl.experiment.config` validates it and re-exports it)."""
 
 from __future__ import annotations
 

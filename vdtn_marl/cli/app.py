@@ -3,9 +3,9 @@
     vdtn-marl [-m] COMMAND [GROUP=OPTION ...] [KEY=VALUE ...] [HYDRA FLAGS]
 
 ``train``, ``jocc`` and ``eval`` compose ``conf/config.yaml`` (schema
-:class:`vdtn_marl.config.RunConfig`) and call :mod:`vdtn_marl.experiment.api`; ``bench`` composes
-``conf/bench.yaml`` (``bench summarize DIR`` tables a finished sweep); ``envs`` lists the
-registry; ``rollout`` forwards to :mod:`vdtn_marl.rollout`.
+:class:`vdtn_marl.experiment.config.RunConfig`) and call :mod:`vdtn_marl.experiment.api`;
+``bench`` composes ``conf/bench.yaml`` (``bench summarize DIR`` tables a finished sweep);
+``envs`` lists the registry; ``rollout`` forwards to :mod:`vdtn_marl.cli.rollout`.
 
 How a Hydra command runs:
 
@@ -16,7 +16,8 @@ How a Hydra command runs:
 3. Pre-pass (:mod:`vdtn_marl.cli.prepass`): every job's config is composed with Hydra's
    compose API (for ``-m``, one per combination of the sweep, expanded as Hydra's basic
    sweeper does), converted to a :class:`RunConfig`, and checked by
-   :func:`vdtn_marl.config.validate` and :func:`vdtn_marl.config.validate_device`; the job's
+   :func:`vdtn_marl.experiment.config.validate` and
+   :func:`vdtn_marl.experiment.config.validate_device`; the job's
    folder must not hold a run unless ``resume=true`` continues it. A bad config prints one
    line, ``error: KEY=VALUE ... allowed ...`` (:mod:`vdtn_marl.cli.errors`), and exits with
    code 2 before anything is written.
@@ -62,7 +63,7 @@ from vdtn_marl.cli.prepass import (
     prevalidate,
     to_run_config,
 )
-from vdtn_marl.registry import EnvSpec, list_envs, spec
+from vdtn_marl.envs.registration import EnvSpec, list_envs, spec
 
 EXIT_CONFIG_ERROR = 2
 EXIT_INTERRUPTED = 130  # the shell's code for Ctrl-C (128 + SIGINT)
@@ -158,11 +159,14 @@ def _cmd_envs(argv: list[str]) -> int:
 
 def _cmd_rollout(rest: list[str]) -> int:
     try:
-        rollout = importlib.import_module("vdtn_marl.rollout")
+        rollout = importlib.import_module("vdtn_marl.cli.rollout")
     except ModuleNotFoundError as exc:
-        if exc.name != "vdtn_marl.rollout":
+        if exc.name != "vdtn_marl.cli.rollout":
             raise
-        print(f"{PROG}: the rollout module (vdtn_marl.rollout) is not available", file=sys.stderr)
+        print(
+            f"{PROG}: the rollout module (vdtn_marl.cli.rollout) is not available",
+            file=sys.stderr,
+        )
         return 1
     rc = rollout.main(rest)
     return rc if isinstance(rc, int) else 0
@@ -172,7 +176,7 @@ def _cmd_rollout(rest: list[str]) -> int:
 
 
 def _cmd_summarize(argv: list[str]) -> int:
-    from vdtn_marl import results
+    from vdtn_marl.reporting import sweep, tables
 
     parser = argparse.ArgumentParser(
         prog=f"{PROG} bench summarize",
@@ -181,18 +185,18 @@ def _cmd_summarize(argv: list[str]) -> int:
     parser.add_argument("sweep_dir", help="a multirun directory (or any folder of run dirs)")
     parser.add_argument("--csv", help="table path (default: SWEEP_DIR/summary.csv)")
     parser.add_argument("--plot", help="plot path (default: SWEEP_DIR/pareto_kappa1.png)")
-    parser.add_argument("--x", default=results.CONTROL_COST, help="summary key on the x axis")
-    parser.add_argument("--y", default=results.V2I_THROUGHPUT, help="summary key on the y axis")
+    parser.add_argument("--x", default=tables.CONTROL_COST, help="summary key on the x axis")
+    parser.add_argument("--y", default=tables.V2I_THROUGHPUT, help="summary key on the y axis")
     args = parser.parse_args(argv)
     if not Path(args.sweep_dir).is_dir():
         print(f"error: {args.sweep_dir} is not a directory", file=sys.stderr)
         return EXIT_CONFIG_ERROR
     try:
-        summary = results.summarize_sweep(args.sweep_dir, args.csv, args.plot, args.x, args.y)
+        summary = sweep.summarize_sweep(args.sweep_dir, args.csv, args.plot, args.x, args.y)
     except FileNotFoundError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 1
-    results.print_table(summary.table, title=f"{len(summary.table)} job(s) in {args.sweep_dir}")
+    tables.print_table(summary.table, title=f"{len(summary.table)} job(s) in {args.sweep_dir}")
     for note in summary.notes:
         print(f"warning: {note}", file=sys.stderr)
     print(f"table: {summary.csv_path}")
@@ -255,22 +259,16 @@ def run_job(command: str, cfg: Any) -> dict:
     from hydra.types import RunMode
     from omegaconf import OmegaConf
 
-    from vdtn_marl import results
     from vdtn_marl.algos.checkpoint import CheckpointError
+    from vdtn_marl.errors import RunFileError, RunWriteError
     from vdtn_marl.experiment import api
-    from vdtn_marl.runs import (
-        CONFIG_FILE,
-        RunFileError,
-        RunWriteError,
-        atomic_write_text,
-        check_interrupt,
-        graceful_interrupts,
-        keep_log_off_console,
-        run_lock,
-    )
+    from vdtn_marl.io.files import CONFIG_FILE, atomic_write_text, run_lock
+    from vdtn_marl.io.interrupts import check_interrupt, graceful_interrupts
+    from vdtn_marl.io.log import keep_log_off_console
+    from vdtn_marl.reporting.tables import print_summary
 
     run_dir = Path(HydraConfig.get().runtime.output_dir)
-    try:  # Ctrl-C from here on stops at a safe point of the run (vdtn_marl.runs)
+    try:  # Ctrl-C from here on stops at a safe point of the run (vdtn_marl.io.interrupts)
         with (
             graceful_interrupts(lambda: interrupted_message(command, run_dir)),
             run_lock(run_dir),  # before anything is written: a second launcher is refused
@@ -290,7 +288,7 @@ def run_job(command: str, cfg: Any) -> dict:
     except (RunFileError, CheckpointError) as exc:  # a run folder that cannot be continued
         print(f"error: {exc}", file=sys.stderr)
         raise SystemExit(EXIT_CONFIG_ERROR) from None
-    except RunWriteError as exc:  # a full disk, say: every file is whole (runs.py)
+    except RunWriteError as exc:  # a full disk, say: every file is whole (io/files.py)
         hint = interrupted_message(command, run_dir).removeprefix("interrupted; ")
         print(f"error: {exc.strerror}; {hint}", file=sys.stderr)
         raise SystemExit(1) from None
@@ -298,7 +296,7 @@ def run_job(command: str, cfg: Any) -> dict:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
         return summary
     if isinstance(summary, dict) and summary:
-        results.print_summary(summary, title=f"{command} summary")
+        print_summary(summary, title=f"{command} summary")
     print(f"run directory: {run_dir}")
     plots = sorted(str(p) for p in run_dir.rglob("*.png"))
     if plots:
@@ -313,7 +311,7 @@ def interrupted_message(command: str, run_dir: Path) -> str:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
-    from vdtn_marl.runs import CHECKPOINT_DIR
+    from vdtn_marl.io.files import CHECKPOINT_DIR
 
     hydra_cfg = HydraConfig.get()
     if command == "eval":
@@ -365,8 +363,10 @@ def _bench_job(cfg: Any) -> None:
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 
-    from vdtn_marl import config, leaderboard
-    from vdtn_marl.runs import graceful_interrupts, keep_log_off_console
+    from vdtn_marl import leaderboard
+    from vdtn_marl.experiment import config
+    from vdtn_marl.io.interrupts import graceful_interrupts
+    from vdtn_marl.io.log import keep_log_off_console
 
     hydra_cfg = HydraConfig.get()
     bench_cfg = config.validate_benchmark(leaderboard.bench_config(job_config(cfg)))
@@ -408,7 +408,7 @@ def _launch(command: str, hydra_argv: list[str]) -> int:
     """Run the ``@hydra.main`` app of ``command`` with ``hydra_argv`` as its command line."""
     import hydra
 
-    from vdtn_marl.config import register_configs
+    from vdtn_marl.experiment.config import register_configs
 
     register_configs()
     app = hydra.main(
@@ -467,10 +467,10 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
     passthrough = (
         hargs.hydra_help or hargs.info or hargs.shell_completion or hargs.experimental_rerun
     )
-    from vdtn_marl.runs import graceful_interrupts
+    from vdtn_marl.io.interrupts import graceful_interrupts
 
     before = "interrupted before the run started; nothing was written"
-    # From here Ctrl-C only sets a flag, read at safe points (vdtn_marl.runs): never inside
+    # From here Ctrl-C only sets a flag, read at safe points (vdtn_marl.io.interrupts): never inside
     # the imports and config checks below, where Python could swallow it or turn it into
     # another error.
     with graceful_interrupts(lambda: before):
@@ -478,7 +478,7 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
 
 
 def _cmd_hydra_run(command, argv, hargs, searchpath, passthrough, before: str) -> int:
-    from vdtn_marl.runs import check_interrupt
+    from vdtn_marl.io.interrupts import check_interrupt
 
     try:
         user = list(hargs.overrides)

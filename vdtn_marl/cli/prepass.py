@@ -1,11 +1,11 @@
 """The command line's pre-pass: compose and validate every job before Hydra writes anything.
 
-:func:`prevalidate` composes each job's config with Hydra's compose API (a ``-m`` sweep is
-expanded as Hydra's basic sweeper does), converts it to a validated
-:class:`~vdtn_marl.config.RunConfig` (:func:`to_run_config`: ranges, device, checkpoint) or
-checks a benchmark (:func:`validate_bench`), and checks that the job's folder holds no run
-unless ``resume=true`` continues it. :func:`eval_overrides` recomposes the config of the run
-that wrote an ``eval`` checkpoint. Every problem is a :class:`~vdtn_marl.cli.errors.CLIError`.
+:func:`prevalidate` composes each job's config with Hydra's compose API (a ``-m`` sweep is expanded
+as Hydra's basic sweeper does), converts it to a validated
+:class:`~vdtn_marl.experiment.config.RunConfig` (:func:`to_run_config`: ranges, device, checkpoint)
+or checks a benchmark (:func:`validate_bench`), and checks that the job's folder holds no run unless
+``resume=true`` continues it. :func:`eval_overrides` recomposes the config of the run that wrote an
+``eval`` checkpoint. Every problem is a :class:`~vdtn_marl.cli.errors.CLIError`.
 """
 
 import argparse
@@ -98,7 +98,8 @@ def _check_launcher(hydra_cfg: Any) -> None:
 
 
 def _validate_bench(data: dict, check_runs: bool = True) -> None:
-    from vdtn_marl import config, leaderboard
+    from vdtn_marl import leaderboard
+    from vdtn_marl.experiment import config
 
     bench_cfg = leaderboard.bench_config(data)
     config.validate_benchmark(bench_cfg)
@@ -147,7 +148,7 @@ def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: in
     continues it (``train``/``jocc``; the config must then be the run's)."""
     from omegaconf import open_dict, read_write
 
-    from vdtn_marl.runs import run_outputs
+    from vdtn_marl.io.files import run_outputs
 
     if run_cfg.resume and command != "eval":
         if job_num is None:
@@ -179,8 +180,8 @@ def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
     """resume=true: the run directory must hold a run whose config matches this one."""
     import yaml
 
-    from vdtn_marl.results import flatten
-    from vdtn_marl.runs import CONFIG_FILE
+    from vdtn_marl.io.files import CONFIG_FILE
+    from vdtn_marl.reporting.tables import flatten
 
     run_dir = Path(str(hydra_cfg.run.dir))
     old_file = run_dir / CONFIG_FILE
@@ -219,8 +220,8 @@ def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]
     from hydra.core.global_hydra import GlobalHydra
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
-    from vdtn_marl.config import register_configs
     from vdtn_marl.errors import ConfigError
+    from vdtn_marl.experiment.config import register_configs
 
     register_configs()
     with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
@@ -261,7 +262,7 @@ def _run_config_of(checkpoint: Any) -> dict | None:
 
 def _run_overrides(saved: dict, parsed: Sequence[Any], extra: Sequence[str]) -> list[str]:
     """Overrides reproducing ``saved`` (a run's config) but for the keys ``parsed`` sets."""
-    from vdtn_marl.results import flatten
+    from vdtn_marl.reporting.tables import flatten
 
     groups = [o for o in parsed if o.key_or_group in _RUN_GROUPS]
     keys = [o.key_or_group for o in parsed if o.key_or_group not in _RUN_GROUPS]
@@ -318,7 +319,7 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
     """Compose and validate every job of the command line; raise :class:`CLIError`."""
     from hydra import initialize_config_module
 
-    from vdtn_marl.config import register_configs
+    from vdtn_marl.experiment.config import register_configs
 
     config_name = HYDRA_COMMANDS[command]
     warnings.filterwarnings("ignore", message=SCHEMA_WARNING, category=UserWarning)

@@ -1,24 +1,32 @@
 """Entry points of the training code, called by the CLI (``vdtn-marl train|jocc|eval``).
 
-Each takes a :class:`~vdtn_marl.config.RunConfig` (validated here) and a run directory, writes
-its outputs there atomically (``metrics.csv``, ``evaluation.csv``, ``checkpoints/``,
-``summary.json``) and returns the summary dict it wrote. ``cfg.resume`` continues an
-interrupted run from its last checkpoint. Each logs (logger ``vdtn_marl.experiment.api``) one line
-when it starts and one with its wall time and main metrics when it ends.
+Each takes a :class:`~vdtn_marl.experiment.config.RunConfig` (validated here) and a run
+directory, writes its outputs there atomically (``metrics.csv``, ``evaluation.csv``,
+``checkpoints/``, ``summary.json``) and returns the summary dict it wrote. ``cfg.resume``
+continues an interrupted run from its last checkpoint. Each logs (logger
+``vdtn_marl.experiment.api``) one line when it starts and one with its wall time and main
+metrics when it ends.
+
+Scripts get one more: :func:`loaded_checkpoints` (the loops of trained checkpoints, for the
+measurements in ``benchmarks/``).
 """
 
 from __future__ import annotations
 
 import logging
+import tempfile
 import time
+from collections.abc import Iterator, Sequence
 from pathlib import Path
+from typing import Any
 
 from vdtn_marl.algos.checkpoint import load_checkpoint, untrained_policies
-from vdtn_marl.config import RunConfig, to_dict, validate
-from vdtn_marl.errors import ConfigError
+from vdtn_marl.errors import CheckpointError, ConfigError
+from vdtn_marl.experiment.config import RunConfig, to_dict, validate
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.results import TABLE_METRICS
-from vdtn_marl.runs import SUMMARY_FILE, atomic_write_json, metrics_line
+from vdtn_marl.io.files import SUMMARY_FILE, atomic_write_json
+from vdtn_marl.io.log import metrics_line
+from vdtn_marl.reporting.tables import TABLE_METRICS
 
 _log = logging.getLogger(__name__)
 
@@ -105,3 +113,23 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
         metrics_line(summary, TABLE_METRICS),
     )  # fmt: skip
     return summary
+
+
+def loaded_checkpoints(
+    paths: Sequence[str | Path], scratch_prefix: str, console: Any = None
+) -> Iterator[tuple[str | Path, JointOptimisation]]:
+    """Yield (path, JOCC loop with every trainer loaded) per checkpoint, one after the other;
+    the loops write to a scratch directory removed at the end (nothing lands next to the
+    checkpoints). A bad checkpoint stops the script with its error. ``console``: a rich
+    console that names each checkpoint's run."""
+    with tempfile.TemporaryDirectory(prefix=scratch_prefix) as scratch:
+        for number, path in enumerate(paths):
+            try:
+                loop = JointOptimisation.from_checkpoint(
+                    path, Path(scratch) / f"run{number}", needs_pi_tilde=True
+                )
+            except CheckpointError as err:
+                raise SystemExit(str(err)) from err
+            if console is not None:
+                console.print(f"[bold]{path}[/]: {loop.cfg.scenario.name}, seed {loop.cfg.seed}")
+            yield path, loop

@@ -3,9 +3,9 @@ leaderboard alike (so both check a run the same way, and neither imports the oth
 
 :func:`hydra_compose` readies Hydra's compose API over the package's configs,
 :func:`compose_config` + :func:`job_config` compose a job as plain data, :func:`to_run_config`
-validates it into a :class:`~vdtn_marl.config.RunConfig` (ranges, device, checkpoint), and
-:func:`translate` turns a composition or validation error into one line that names the key,
-the value given and what is allowed (``KEY=VALUE ... allowed: ...``).
+validates it into a :class:`~vdtn_marl.experiment.config.RunConfig` (ranges, device,
+checkpoint), and :func:`translate` turns a composition or validation error into one line that
+names the key, the value given and what is allowed (``KEY=VALUE ... allowed: ...``).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ def hydra_compose() -> Iterator[None]:
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
 
-    from vdtn_marl.config import register_configs
+    from vdtn_marl.experiment.config import register_configs
 
     if GlobalHydra.instance().is_initialized():
         yield
@@ -58,7 +58,7 @@ def to_run_config(data: dict, command: str = "jocc") -> Any:
     """Composed job config (plain data) -> validated :class:`RunConfig`: ranges, the device,
     and the checkpoint (required by ``eval``; a run directory stands for its last checkpoint,
     and ``data["checkpoint"]`` is updated to the file)."""
-    from vdtn_marl import config
+    from vdtn_marl.experiment import config
 
     data["checkpoint"] = checkpoint_file(data.get("checkpoint"), required=command == "eval")
     run_cfg = config.validate(config.from_dict(data))
@@ -76,8 +76,8 @@ def _check_checkpoint(run_cfg: Any, command: str) -> None:
         load_checkpoint,
         untrained_policies,
     )
-    from vdtn_marl.config import to_dict
     from vdtn_marl.errors import ConfigError
+    from vdtn_marl.experiment.config import to_dict
 
     name = f"checkpoint={run_cfg.checkpoint}"
     try:
@@ -111,7 +111,7 @@ def checkpoint_file(value: Any, required: bool) -> Any:
     """The file a ``checkpoint`` value names (a run directory stands for its
     ``checkpoints/last.pt``); ``None`` when none is given and none is ``required``."""
     from vdtn_marl.errors import ConfigError
-    from vdtn_marl.runs import CHECKPOINT_DIR
+    from vdtn_marl.io.files import CHECKPOINT_DIR
 
     allowed = f"allowed: a run directory (with {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
     if value is None:
@@ -165,7 +165,7 @@ def _schema_field(root: type, path: str) -> tuple[type | None, str | None]:
 
 
 def _schema_root(config_name: str) -> type:
-    from vdtn_marl import config
+    from vdtn_marl.experiment import config
 
     return config.RunConfig if config_name == "config" else config.BenchConfig
 

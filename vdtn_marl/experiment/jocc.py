@@ -19,11 +19,14 @@ One JOCC iteration runs four stages:
 by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
 replaces the learned RRA policy (their training stages are skipped).
 
-Checkpoints (``checkpoints/last.pt``) are written every ``experiment.checkpoint_every`` PPO
-iterations and at the end of every stage; ``resume=true`` continues from the last one and,
-on the same device, reproduces an uninterrupted run bit for bit.
+This module holds the stages and their order. Checkpoints (``checkpoints/last.pt``, written
+every ``experiment.checkpoint_every`` PPO iterations and at the end of every stage; ``resume=true``
+continues from the last one bit for bit) are :mod:`.checkpoint`'s; the ``evaluate`` stage, EVoI
+and the run's summary are :mod:`.evaluate`'s; the files a run writes besides those are
+:mod:`.outputs`'.
 
-Run ``python -m vdtn_marl.experiment.jocc`` for one JOCC iteration with the default small budgets.
+``python -m vdtn_marl.experiment.jocc`` runs one JOCC iteration with the default small budgets
+(:func:`main`).
 """
 
 from __future__ import annotations
@@ -39,51 +42,32 @@ from typing import Any
 
 import torch
 
-from vdtn_marl import __version__
 from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
-from vdtn_marl.algos.checkpoint import (
-    CheckpointError,
-    load_checkpoint,
-    rng_state,
-    save_checkpoint,
-    set_rng_state,
-)
-from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
 from vdtn_marl.algos.trainer import Trainer, trainer_class
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
-from vdtn_marl.config import (
-    RunConfig,
-    from_saved_dict,
-    to_dict,
-    validate,
-    validate_device,
-)
 from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.experiment import outputs
-from vdtn_marl.runs import (
-    CHECKPOINT_DIR,
+from vdtn_marl.experiment import checkpoint, outputs
+from vdtn_marl.experiment.config import RunConfig, validate, validate_device
+from vdtn_marl.experiment.evaluate import ActingSystem, evaluate_stage, run_summary
+from vdtn_marl.io.files import (
     EVALUATION_FILE,
     SUMMARY_FILE,
-    MetricsLog,
     atomic_write_json,
-    check_interrupt,
-    check_summary_file,
-    interrupt_requested,
-    logged_stage,
-    progress,
-    remove_stale_temp_files,
     run_lock,
     run_outputs,
 )
+from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
+from vdtn_marl.io.log import logged_stage, progress
+from vdtn_marl.io.metrics import MetricsLog
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, expected_voi, mean_ci
+from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
 STAGE_POLICIES = {
@@ -98,27 +82,12 @@ TASK_STAGES = {
     "control_impaired": ("control_perfect", "control_impaired", "evaluate"),
     "rra": ("control_perfect", "rra", "evaluate"),
 }
-#: Metrics of each JOCC iteration's evaluation in the run summary (``per_iteration``).
-PER_ITERATION_METRICS = (
-    "jocc_iteration",
-    "cam_delivery_rate",
-    "v2i_throughput_mbps_per_link",
-    "gap_error_abs_m",
-    "speed_error_abs_mps",
-    "control_cost",
-    "collision_rate",
-    "evoi",
-)
 _log = logging.getLogger(__name__)
 
 #: rra.value_fit=acting: scenarios per RRA policy whose states v* is fitted on, and the seed
 #: offset of those scenarios (apart from training's and evaluation's)
 VALUE_FIT_SCENARIOS = 32
 VALUE_FIT_SEED_OFFSET = 2_000_000_000
-
-#: Evaluation scenarios are seeded apart from every training scenario.
-EVAL_SEED_OFFSET = 1_000_000_000
-LAST_CHECKPOINT = "last.pt"
 
 
 class SwitchablePolicy:
@@ -275,21 +244,10 @@ class JointOptimisation:
         weights loaded, writing nothing next to the checkpoint (``run_dir`` is its run
         directory; torch threads are left as the caller set them). ``needs_pi_tilde``
         refuses a checkpoint of a run with learned control that trained no π̃."""
-        payload = load_checkpoint(path)
-        try:
-            cfg = from_saved_dict(payload["config"])
-        except (KeyError, TypeError) as err:
-            raise CheckpointError(f"checkpoint {str(path)!r} holds no run config ({err})") from err
-        task = payload.get("task")
-        trains_pi_tilde = task in ("jocc", "control_impaired")
-        if needs_pi_tilde and cfg.control.name == "learned" and not trains_pi_tilde:
-            raise CheckpointError(
-                f"checkpoint {str(path)!r} is from task={task!r}, which trains no π̃; "
-                "use a checkpoint of a jocc or control_impaired run"
-            )
+        cfg, saved = checkpoint.run_config(path, needs_pi_tilde)
         cfg.threads = 0
         loop = cls(cfg, run_dir, task="jocc")
-        loop.load_policies(payload)
+        loop.load_policies(saved)
         return loop
 
     def ivoi_estimator(
@@ -327,61 +285,19 @@ class JointOptimisation:
     # ------------------------------------------------------------------ checkpoints
     @property
     def checkpoint_path(self) -> Path:
-        return self.run_dir / CHECKPOINT_DIR / LAST_CHECKPOINT
+        return checkpoint.checkpoint_path(self.run_dir)
 
     def save(self, path: Path | None = None) -> Path:
-        return save_checkpoint(
-            path or self.checkpoint_path,
-            {
-                "config": to_dict(self.cfg),
-                "task": self.task,
-                "position": dict(self.position),
-                "trainers": {name: t.state_dict() for name, t in self.trainers().items()},
-                "rng": rng_state(),
-                "log_rows": {"train": len(self.train_log.rows), "eval": len(self.eval_log.rows)},
-                "version": __version__,
-                **({"value_fit": self.v_fit.state_dict()} if self.v_fit is not None else {}),
-            },
-        )
+        """Write the loop's checkpoint (:func:`.checkpoint.save`)."""
+        return checkpoint.save(self, path)
 
     def load_policies(self, payload: dict[str, Any]) -> None:
         """Load every trainer state a checkpoint holds (policies, critics, optimisers)."""
-        for name, trainer in self.trainers().items():
-            state = payload["trainers"].get(name)
-            if state is not None:
-                try:
-                    trainer.load_state_dict(state)
-                except (RuntimeError, KeyError) as err:
-                    raise CheckpointError(
-                        f"checkpoint trainer {name!r} does not fit this config ({err})"
-                    ) from err
-        if self.v_fit is not None and "value_fit" in payload:
-            self.v_fit.load_state_dict(payload["value_fit"])
+        checkpoint.load_policies(self, payload)
 
     def resume(self) -> bool:
         """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
-        if not self.checkpoint_path.exists():
-            return False
-        payload = load_checkpoint(self.checkpoint_path, to_dict(self.cfg))
-        if payload.get("task") != self.task:
-            raise CheckpointError(
-                f"checkpoint {str(self.checkpoint_path)!r} is from task={payload.get('task')!r}, "
-                f"not task={self.task!r}"
-            )
-        self.load_policies(payload)
-        self.position = dict(payload["position"])
-        set_rng_state(payload["rng"])
-        rows = payload["log_rows"]
-        check_summary_file(self.run_dir)
-        train_log = MetricsLog.resume(self.run_dir, expected_rows=rows["train"])
-        eval_log = MetricsLog.resume(
-            self.run_dir, tensorboard=False, filename=EVALUATION_FILE, expected_rows=rows["eval"]
-        )
-        remove_stale_temp_files(self.run_dir)  # of a writer killed mid-write
-        self.train_log, self.eval_log = train_log, eval_log
-        self.train_log.truncate(rows["train"])
-        self.eval_log.truncate(rows["eval"])
-        return True
+        return checkpoint.resume(self)
 
     # ------------------------------------------------------------------ stages
     def _stage_budget(self, stage: str) -> tuple[Trainer | None, int]:
@@ -425,7 +341,7 @@ class JointOptimisation:
                 bar.update(1)
                 bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
                 if interrupt_requested() and trainer.iteration < end:
-                    self.save()  # Ctrl-C: keep this iteration, then stop (runs.py)
+                    self.save()  # Ctrl-C: keep this iteration, then stop (io/interrupts.py)
                     check_interrupt()
                 if every and trainer.iteration < end and trainer.iteration % every == 0:
                     self.save()
@@ -481,49 +397,26 @@ class JointOptimisation:
         self.position["warm_start"] = {"teacher": self.cfg.control.warm_start, **asdict(stats)}
 
     def evaluate(self) -> dict[str, Any]:
-        """The ``evaluate`` stage: metrics of the acting system, EVoI against π*."""
-        cfg = self.cfg
-        common = dict(
-            episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
-            seed=EVAL_SEED_OFFSET + cfg.seed, gamma=self.gamma, device=self.device,
+        """The ``evaluate`` stage (:func:`.evaluate.evaluate_stage`): metrics of the acting
+        system, EVoI against π*; the row is logged to ``evaluation.csv`` and returned."""
+        acting = None
+        if self.stages != TASK_STAGES["control"]:  # task=control scores π* against the CACC
+            acting = ActingSystem(
+                self.control_policy(), self.rra_policy(), self.estimator, self.completion
+            )
+        result = evaluate_stage(
+            self.cfg,
+            self.params,
+            ActorPolicy(self.pi_star.actor, "vehicle"),
+            acting,
             trace_source=self.eval_traces,
-        )  # fmt: skip
-        began = time.perf_counter()
-        optimal = evaluate_system(
-            self.params, ActorPolicy(self.pi_star.actor, "vehicle"), None, perfect=True, **common
+            device=self.device,
+            jocc_iteration=self.position["iteration"],
         )
-        row: dict[str, Any] = {"jocc_iteration": self.position["iteration"]}
-        if self.stages == TASK_STAGES["control"]:
-            cacc = evaluate_system(
-                self.params, CACCController(self.params.platoon), None, perfect=True, **common
-            )
-            row.update(optimal.metrics)
-            row["cacc_control_cost"] = cacc.metrics["control_cost"]
-            self._last_results = (optimal, None)
-        else:
-            acting: EvalResult = evaluate_system(
-                self.params,
-                self.control_policy(),
-                self.rra_policy(),
-                perfect=False,
-                ivoi_estimator=self.estimator,
-                record_traces=True,
-                completion=self.completion,
-                **common,
-            )
-            evoi, low, high = expected_voi(acting.returns, optimal.returns)
-            ivoi, ivoi_low, ivoi_high = mean_ci(acting.ivoi_sums)
-            row.update(acting.metrics)
-            row.update(
-                optimal_control_cost=optimal.metrics["control_cost"],
-                evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
-                ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
-            )  # fmt: skip
-            self._last_results = (optimal, acting)
-        row["eval_seconds"] = time.perf_counter() - began
-        self.eval_log.log(row)
-        self.last_evaluation = row
-        return row
+        self._last_results = (result.optimal, result.acting)
+        self.eval_log.log(result.row)
+        self.last_evaluation = result.row
+        return result.row
 
     # ------------------------------------------------------------------ loop
     def run(self) -> dict[str, Any]:
@@ -591,54 +484,30 @@ class JointOptimisation:
         return steps
 
     def summary(self, seconds: float, resumed: bool) -> dict[str, Any]:
+        """The run's summary (:func:`.evaluate.run_summary`) with the last evaluation."""
         evaluation = dict(self.last_evaluation or {})
         if not evaluation and self.eval_log.rows:
             evaluation = dict(self.eval_log.rows[-1])
-        return {
-            "vdtn_marl_version": __version__,
-            "task": self.task,
-            "seed": self.cfg.seed,
-            # the RRA reward weights, where this task trains RRA agents
-            **(
-                {"kappa1": self.cfg.rra.kappa1, "kappa2": self.cfg.rra.kappa2_value}
-                if "rra" in self.stages
-                else {}
-            ),
-            "rra": self.cfg.rra.name,
-            "control": self.cfg.control.name,
-            "scenario": self.cfg.scenario.name,
-            "traces": self.cfg.scenario.traces,
-            "trace_path": self.cfg.scenario.trace_path,
-            # what pre-processing changed in a trace file (samples clipped, accelerations)
-            "trace_preprocessing": getattr(self.train_traces, "preprocessing", None),
-            "iterations": self.position["iteration"],
-            "trainer_iterations": {n: t.iteration for n, t in self.trainers().items()},
-            # with algo.validate_every: the trainer iteration whose weights each stage kept
-            "selected_iterations": dict(self.position.get("selected_iterations", {})),
-            "warm_start": self.position.get("warm_start"),
-            # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
-            "value_fit": self.position.get("value_fit"),
-            "seconds": seconds,
-            "resumed": resumed,
-            **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
-            # the evaluation after each JOCC iteration: does the loop improve across them?
-            "per_iteration": [
-                {k: row.get(k) for k in PER_ITERATION_METRICS if k in row}
-                for row in self.eval_log.rows
-            ],
-            "config": self._summary_config(),
-        }
+        return run_summary(
+            self.cfg,
+            self.task,
+            self.stages,
+            position=self.position,
+            trainer_iterations={n: t.iteration for n, t in self.trainers().items()},
+            trace_preprocessing=getattr(self.train_traces, "preprocessing", None),
+            evaluation=evaluation,
+            eval_rows=self.eval_log.rows,
+            seconds=seconds,
+            resumed=resumed,
+        )
 
-    def _summary_config(self) -> dict[str, Any]:
-        """The run's config for its summary: ``task`` (a key of ``vdtn-marl train``, which
-        picks one stage) only where the run is one stage; a jocc run's task is the summary's."""
-        config = to_dict(self.cfg)
-        if self.task == "jocc":
-            config.pop("task", None)
-        return config
+
+# --- python -m vdtn_marl.experiment.jocc ---------------------------------------------------
 
 
 def main(argv: list[str] | None = None) -> int:
+    """``python -m vdtn_marl.experiment.jocc``: one JOCC iteration with the default small
+    budgets, a few flags instead of the CLI's keys; prints the metrics."""
     parser = argparse.ArgumentParser(
         prog="python -m vdtn_marl.experiment.jocc",
         description="One JOCC iteration with the default small budgets; prints the metrics.",

@@ -8,7 +8,7 @@ import io
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.runs import RAW_EVALUATION_FILE, atomic_write_bytes
+from vdtn_marl.io.files import RAW_EVALUATION_FILE, atomic_write_bytes
 from vdtn_marl.sim.params import TwinParams
 
 
@@ -36,29 +36,27 @@ def write_run_plots(
 ) -> list[str]:
     """Training curves (from the ``metrics.csv`` at ``train_log``, if any) and, for the last
     evaluation ``acting`` (if any), its error traces and CAM latency CDF; the paths written."""
-    from vdtn_marl import results
+    from vdtn_marl.reporting import plots
 
     run_dir = Path(run_dir)
     written = []
     if train_log is not None:
-        written.append(
-            results.plot_training_curves(train_log, run_dir / results.TRAINING_CURVES_FILE)
-        )
+        written.append(plots.plot_training_curves(train_log, run_dir / plots.TRAINING_CURVES_FILE))
     if acting is not None:
         pp = params.platoon
         written.append(
-            results.plot_error_traces(
+            plots.plot_error_traces(
                 acting.traces["gap_error_abs_m"],
                 acting.traces["speed_error_abs_mps"],
                 pp.control_interval_s,
-                run_dir / results.ERROR_TRACES_FILE,
+                run_dir / plots.ERROR_TRACES_FILE,
             )
         )
         written.append(
-            results.plot_latency_cdf(
+            plots.plot_latency_cdf(
                 {label: acting.cam_latency_ms},
                 pp.control_interval_s * 1000.0,
-                run_dir / results.LATENCY_CDF_FILE,
+                run_dir / plots.LATENCY_CDF_FILE,
             )
         )
     return [str(p) for p in written]

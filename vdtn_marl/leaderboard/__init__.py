@@ -1,11 +1,11 @@
 """The leaderboard: run a benchmark grid, aggregate it across seeds, and report it.
 
-A benchmark (``conf/benchmark/*.yaml``, schema :class:`vdtn_marl.config.BenchmarkConfig`) is
-scenarios × methods × seeds. Every *cell* is one ``vdtn-marl jocc`` run: its config is composed
-by Hydra exactly as the command line composes it (``scenario=S experiment=E <overrides>
-<method> <budget> seed=K``), validated by :func:`vdtn_marl.experiment.compose.to_run_config`,
-and run by :func:`vdtn_marl.experiment.api.jocc` in ``<out_dir>/<scenario>/<method>/seed<k>/``.
-Evaluation is seeded by the run's seed only (``EVAL_SEED_OFFSET + seed``), so every method of a
+A benchmark (``conf/benchmark/*.yaml``, schema :class:`vdtn_marl.experiment.config.BenchmarkConfig`)
+is scenarios × methods × seeds. Every *cell* is one ``vdtn-marl jocc`` run: its config is composed
+by Hydra exactly as the command line composes it (``scenario=S experiment=E <overrides> <method>
+<budget> seed=K``), validated by :func:`vdtn_marl.experiment.compose.to_run_config`, and run by
+:func:`vdtn_marl.experiment.api.jocc` in ``<out_dir>/<scenario>/<method>/seed<k>/``. Evaluation is
+seeded by the run's seed only (``EVAL_SEED_OFFSET + seed``), so every method of a
 scenario is evaluated on the same held-out leader traces, initial states and channel draws.
 
 :func:`run_benchmark` runs the grid cell by cell (``shard``/``num_shards`` split it between the

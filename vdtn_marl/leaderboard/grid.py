@@ -10,7 +10,6 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.config import BenchConfig, BenchmarkConfig
 from vdtn_marl.errors import LeaderboardError
 
 # hydra_compose, CAM_LATENCY_KEYS, METRICS and Metric moved to vdtn_marl.experiment; they stay
@@ -22,16 +21,14 @@ from vdtn_marl.experiment.compose import (
     to_run_config,
     translate,
 )
+from vdtn_marl.experiment.config import BenchConfig, BenchmarkConfig
 from vdtn_marl.experiment.metrics import (
     CAM_LATENCY_KEYS,  # noqa: F401
     METRIC_KEYS,
     METRICS,  # noqa: F401
     Metric,  # noqa: F401
 )
-from vdtn_marl.runs import (
-    SUMMARY_FILE,
-    read_json,
-)
+from vdtn_marl.io.files import SUMMARY_FILE, read_json
 
 MANIFEST_FILE = "benchmark.json"
 #: Config keys a resumed cell may change (the rest must match the cell's own run).
@@ -126,7 +123,7 @@ def compose_cell(cell: Cell, device: str) -> tuple[dict, Any]:
 
 def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:
     """Every method of a scenario must see the same held-out scenarios (eval budget, model)."""
-    from vdtn_marl.results import flatten
+    from vdtn_marl.reporting.tables import flatten
 
     reference: dict[str, tuple[Cell, dict]] = {}
     for cell, data in cells_data.items():
@@ -173,7 +170,7 @@ def check_out_dir(cfg: BenchConfig) -> None:
             f"{path} cannot be read ({exc}); remove it or pick another out_dir"
         ) from exc
     new = manifest(cfg)
-    from vdtn_marl.results import flatten
+    from vdtn_marl.reporting.tables import flatten
 
     a, b = flatten(old.get("benchmark", {})), flatten(new["benchmark"])
     keys = {k for k in set(a) | set(b) if k.split(".")[0] in RUN_FIELDS}
@@ -191,7 +188,7 @@ def check_out_dir(cfg: BenchConfig) -> None:
 def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
     """The cell's summary if the cell is finished (else None). A finished cell whose config
     differs from ``data`` (outside :data:`FREE_KEYS`) raises :class:`LeaderboardError`."""
-    from vdtn_marl.results import flatten
+    from vdtn_marl.reporting.tables import flatten
 
     path = cell_dir / SUMMARY_FILE
     if not path.is_file():

@@ -10,15 +10,11 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl import __version__
-from vdtn_marl.config import BenchConfig
+from vdtn_marl.experiment.config import BenchConfig
+from vdtn_marl.io.files import CONFIG_FILE, METRICS_FILE, RAW_EVALUATION_FILE
 from vdtn_marl.leaderboard.grid import Cell
 from vdtn_marl.leaderboard.stats import describe_interval
-from vdtn_marl.results import is_finite
-from vdtn_marl.runs import (
-    CONFIG_FILE,
-    METRICS_FILE,
-    RAW_EVALUATION_FILE,
-)
+from vdtn_marl.reporting.tables import is_finite
 
 
 def load_raw_evaluation(cell_dir: Path) -> dict[str, Any] | None:
@@ -42,7 +38,7 @@ def write_plots(
     import numpy as np
     import pandas as pd
 
-    from vdtn_marl import results
+    from vdtn_marl import reporting
 
     b = cfg.benchmark
     note = f"vdtn-marl {__version__} · benchmark {b.name} v{b.version}"
@@ -69,7 +65,7 @@ def write_plots(
             traces = {m: raw(m, seed) for m in pair}
             if pair and all(t is not None and "gap_error_abs_m" in t for t in traces.values()):
                 interval = float(next(iter(traces.values()))["interval_s"])
-                plots["error_traces"] = results.plot_error_trace_comparison(
+                plots["error_traces"] = reporting.plot_error_trace_comparison(
                     {
                         m: (t["gap_error_abs_m"], t["speed_error_abs_mps"])
                         for m, t in traces.items()
@@ -83,7 +79,7 @@ def write_plots(
 
         # 2. bars with CIs
         for key, kind, ylabel in (
-            (results.V2I_THROUGHPUT, "v2i_throughput", "V2I throughput per link (Mbps)"),
+            (reporting.V2I_THROUGHPUT, "v2i_throughput", "V2I throughput per link (Mbps)"),
             ("cam_delivery_rate", "cam_delivery", "CAM delivery rate (fraction within interval)"),
             ("control_cost", "control_cost", "control cost (dimensionless; lower is better)"),
         ):
@@ -95,7 +91,7 @@ def write_plots(
                 }
                 for method in by_method
             ]
-            plots[kind] = results.plot_metric_bars(
+            plots[kind] = reporting.plot_metric_bars(
                 bars,
                 report_dir / f"{prefix}{kind}.png",
                 ylabel,
@@ -119,7 +115,7 @@ def write_plots(
                 label = f"{method} ({share} of CAMs delivered)"
                 latencies[label] = np.concatenate(pooled)
         if latencies and interval_s is not None:
-            plots["cam_latency_cdf"] = results.plot_latency_cdf(
+            plots["cam_latency_cdf"] = reporting.plot_latency_cdf(
                 latencies,
                 interval_s * 1000.0,
                 report_dir / f"{prefix}cam_latency_cdf.png",
@@ -131,15 +127,15 @@ def write_plots(
         pareto_rows = []
         for row in scenario_rows:
             cfg_file = Path(row["run_dir"]) / CONFIG_FILE
-            config = results._read_yaml(cfg_file) if cfg_file.is_file() else {}
-            flat = results.flatten(config or {})
+            config = reporting.tables._read_yaml(cfg_file) if cfg_file.is_file() else {}
+            flat = reporting.flatten(config or {})
             if (
                 flat.get("rra.name") in ("jocc", "throughput")
                 and flat.get("control.name") == "learned"
             ):
                 pareto_rows.append(
                     {
-                        **{k: flat.get(k) for k in results.CONFIG_COLUMNS},
+                        **{k: flat.get(k) for k in reporting.CONFIG_COLUMNS},
                         **row,
                         "rra.kappa1": flat.get("rra.kappa1"),
                     }
@@ -147,7 +143,7 @@ def write_plots(
         table = pd.DataFrame(pareto_rows)
         if len(table) and table["rra.kappa1"].nunique() > 1:
             with contextlib.suppress(ValueError):
-                plots["pareto_kappa1"] = results.plot_kappa1_pareto(
+                plots["pareto_kappa1"] = reporting.plot_kappa1_pareto(
                     table,
                     report_dir / f"{prefix}pareto_kappa1.png",
                     title=f"{scenario}: κ1 of the RRA reward (learned control)",
@@ -168,7 +164,7 @@ def write_plots(
             if files and rra_learned:
                 curves[f"{method} (n={n_runs[method]})"] = files
         if curves:
-            plots["training_curves"] = results.plot_training_curves(
+            plots["training_curves"] = reporting.plot_training_curves(
                 curves,
                 report_dir / f"{prefix}training_curves.png",
                 title=f"{scenario}: mean over seeds (band: min–max)",

@@ -13,13 +13,14 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl import __version__
-from vdtn_marl.config import BenchConfig
 from vdtn_marl.data.profiles import TIME_SPLIT_TRAIN_FRACTION
 from vdtn_marl.data.selection import split_in_time
 from vdtn_marl.data.traces import trace_set_provenance
 from vdtn_marl.errors import LeaderboardError
 from vdtn_marl.experiment.compose import hydra_compose
+from vdtn_marl.experiment.config import BenchConfig
 from vdtn_marl.experiment.metrics import METRICS
+from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
 from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan
 from vdtn_marl.leaderboard.plots import write_plots
 from vdtn_marl.leaderboard.stats import (
@@ -35,12 +36,7 @@ from vdtn_marl.leaderboard.stats import (
     statistics,
 )
 from vdtn_marl.leaderboard.target import check_target, target_markdown
-from vdtn_marl.results import is_finite
-from vdtn_marl.runs import (
-    atomic_write_json,
-    atomic_write_text,
-    read_json,
-)
+from vdtn_marl.reporting.tables import is_finite
 
 REPORT_FILE = "LEADERBOARD.md"
 STATS_JSON = "leaderboard.json"

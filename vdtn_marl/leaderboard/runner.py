@@ -6,8 +6,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.config import BenchConfig, selected_cells
 from vdtn_marl.experiment.compose import hydra_compose
+from vdtn_marl.experiment.config import BenchConfig, selected_cells
+from vdtn_marl.io.files import CONFIG_FILE, atomic_write_json, atomic_write_text, run_lock
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
     Cell,
@@ -19,12 +20,6 @@ from vdtn_marl.leaderboard.grid import (
     plan,
 )
 from vdtn_marl.leaderboard.report import write_report
-from vdtn_marl.runs import (
-    CONFIG_FILE,
-    atomic_write_json,
-    atomic_write_text,
-    run_lock,
-)
 
 
 def run_cell(cell: Cell, data: dict, run_cfg: Any, out_dir: str | Path) -> dict:
@@ -55,7 +50,7 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
     A cell that fails is reported and the others go on; the report covers the complete cells
     and says how many are missing.
     """
-    from vdtn_marl.runs import progress
+    from vdtn_marl.io.log import progress
 
     cells = plan(cfg)
     wanted = set(selected_cells(cfg.cells, [c.name for c in cells]))

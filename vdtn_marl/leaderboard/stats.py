@@ -27,10 +27,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from vdtn_marl.config import BENCHMARK_INTERVALS, BenchConfig, BenchmarkConfig
+from vdtn_marl.experiment.config import BENCHMARK_INTERVALS, BenchConfig, BenchmarkConfig
 from vdtn_marl.experiment.metrics import METRICS, Metric
 from vdtn_marl.leaderboard.grid import Cell, complete_summary
-from vdtn_marl.results import is_finite
+from vdtn_marl.reporting.tables import is_finite
 
 INTERVALS = BENCHMARK_INTERVALS  # ("t", "bca", "percentile")
 DEFAULT_INTERVAL = "t"
@@ -232,7 +232,7 @@ def aggregate(
 
 def collect_runs(cfg: BenchConfig, cells: Sequence[Cell], composed: Mapping) -> list[dict]:
     """One row per complete cell: scenario, method, seed, the summary's scalar metrics."""
-    from vdtn_marl.results import flatten, metrics_of
+    from vdtn_marl.reporting.tables import flatten, metrics_of
 
     rows = []
     for cell in cells:

@@ -34,10 +34,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from vdtn_marl.config import BenchmarkConfig, BenchmarkTargetConfig
+from vdtn_marl.experiment.config import BenchmarkConfig, BenchmarkTargetConfig
 from vdtn_marl.experiment.metrics import METRICS
 from vdtn_marl.leaderboard.stats import t_ci
-from vdtn_marl.results import is_finite
+from vdtn_marl.reporting.tables import is_finite
 
 MET, MISSED, UNDECIDED = "met", "missed", "not decided"
 INTERVAL_TEXT = (

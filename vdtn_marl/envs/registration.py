@@ -1,4 +1,5 @@
-"""Environment registry: ``make``, ``register``, ``spec``, ``list_envs``.
+"""Environment registry: ``make``, ``register``, ``spec``, ``list_envs`` (re-exported by
+:mod:`vdtn_marl`).
 
 Ids have the form ``namespace/name-vN``. Entry points are either callables or strings
 ``"module.path:ClassName"`` that are imported only when :func:`make` is called, so registering an

@@ -1,0 +1,169 @@
+"""The JOCC loop's ``evaluate`` stage, EVoI, and the metrics of a run's summary.
+
+:func:`evaluate_stage` scores the acting system (π̃ or a control baseline, with the current RRA
+policy, on impaired observations) and π* (on perfect ones) over the same held-out scenarios,
+seeded apart from every training scenario (:data:`EVAL_SEED_OFFSET`): control cost, gap/speed
+errors, CAM delivery and latency, V2I throughput per link, EVoI = J̃ − J* with its 95% CI
+(:func:`~vdtn_marl.voi.expected_voi`) and, for comparison, the sum of the IVoI the estimator
+paid. A ``task=control`` run scores π* against the CACC instead.
+
+:func:`run_summary` is the run's ``summary.json``: what ran, the last evaluation's metrics,
+and the evaluation after each JOCC iteration (:data:`PER_ITERATION_METRICS`).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import torch
+
+from vdtn_marl import __version__
+from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
+from vdtn_marl.data.traces import TraceSource
+from vdtn_marl.experiment.config import RunConfig, to_dict
+from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.voi import expected_voi, mean_ci
+
+#: Evaluation scenarios are seeded apart from every training scenario.
+EVAL_SEED_OFFSET = 1_000_000_000
+#: Metrics of each JOCC iteration's evaluation in the run summary (``per_iteration``).
+PER_ITERATION_METRICS = (
+    "jocc_iteration",
+    "cam_delivery_rate",
+    "v2i_throughput_mbps_per_link",
+    "gap_error_abs_m",
+    "speed_error_abs_mps",
+    "control_cost",
+    "collision_rate",
+    "evoi",
+)
+
+
+@dataclass
+class ActingSystem:
+    """What acts on impaired observations: the control policy (π̃ or a baseline, obs →
+    commands), the RRA policy, the IVoI estimator whose ξ is summed, and the completion of
+    late or lost CAM content."""
+
+    control: Callable
+    rra: Callable
+    ivoi_estimator: Any
+    completion: Any
+
+
+@dataclass
+class Evaluation:
+    """One ``evaluate`` stage: the row of ``evaluation.csv`` and the results behind it
+    (``acting`` is None when π* was scored against the CACC)."""
+
+    row: dict[str, Any]
+    optimal: EvalResult
+    acting: EvalResult | None
+
+
+def evaluate_stage(
+    cfg: RunConfig,
+    params: TwinParams,
+    optimal_policy: Callable,
+    acting: ActingSystem | None,
+    *,
+    trace_source: str | TraceSource,
+    device: torch.device,
+    jocc_iteration: int,
+) -> Evaluation:
+    """Evaluate π* (``optimal_policy``, perfect observations) and the ``acting`` system over
+    ``cfg.experiment.eval_episodes`` held-out scenarios of ``eval_intervals`` intervals; with
+    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead."""
+    common = dict(
+        episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
+        seed=EVAL_SEED_OFFSET + cfg.seed, gamma=cfg.algo.gamma, device=device,
+        trace_source=trace_source,
+    )  # fmt: skip
+    began = time.perf_counter()
+    optimal = evaluate_system(params, optimal_policy, None, perfect=True, **common)
+    row: dict[str, Any] = {"jocc_iteration": jocc_iteration}
+    result = None
+    if acting is None:
+        cacc = evaluate_system(params, CACCController(params.platoon), None, perfect=True, **common)
+        row.update(optimal.metrics)
+        row["cacc_control_cost"] = cacc.metrics["control_cost"]
+    else:
+        result = evaluate_system(
+            params,
+            acting.control,
+            acting.rra,
+            perfect=False,
+            ivoi_estimator=acting.ivoi_estimator,
+            record_traces=True,
+            completion=acting.completion,
+            **common,
+        )
+        evoi, low, high = expected_voi(result.returns, optimal.returns)
+        ivoi, ivoi_low, ivoi_high = mean_ci(result.ivoi_sums)
+        row.update(result.metrics)
+        row.update(
+            optimal_control_cost=optimal.metrics["control_cost"],
+            evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
+            ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
+        )  # fmt: skip
+    row["eval_seconds"] = time.perf_counter() - began
+    return Evaluation(row, optimal, result)
+
+
+def run_summary(
+    cfg: RunConfig,
+    task: str,
+    stages: Sequence[str],
+    *,
+    position: Mapping[str, Any],
+    trainer_iterations: Mapping[str, int],
+    trace_preprocessing: Any,
+    evaluation: Mapping[str, Any],
+    eval_rows: Sequence[Mapping[str, Any]],
+    seconds: float,
+    resumed: bool,
+) -> dict[str, Any]:
+    """The summary of a run of ``task`` (its ``stages``) at ``position``: ``evaluation`` is the
+    last evaluation's row, ``eval_rows`` every evaluation's (``evaluation.csv``)."""
+    return {
+        "vdtn_marl_version": __version__,
+        "task": task,
+        "seed": cfg.seed,
+        # the RRA reward weights, where this task trains RRA agents
+        **({"kappa1": cfg.rra.kappa1, "kappa2": cfg.rra.kappa2_value} if "rra" in stages else {}),
+        "rra": cfg.rra.name,
+        "control": cfg.control.name,
+        "scenario": cfg.scenario.name,
+        "traces": cfg.scenario.traces,
+        "trace_path": cfg.scenario.trace_path,
+        # what pre-processing changed in a trace file (samples clipped, accelerations)
+        "trace_preprocessing": trace_preprocessing,
+        "iterations": position["iteration"],
+        "trainer_iterations": dict(trainer_iterations),
+        # with algo.validate_every: the trainer iteration whose weights each stage kept
+        "selected_iterations": dict(position.get("selected_iterations", {})),
+        "warm_start": position.get("warm_start"),
+        # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
+        "value_fit": position.get("value_fit"),
+        "seconds": seconds,
+        "resumed": resumed,
+        **{k: v for k, v in evaluation.items() if k != "jocc_iteration"},
+        # the evaluation after each JOCC iteration: does the loop improve across them?
+        "per_iteration": [
+            {k: row.get(k) for k in PER_ITERATION_METRICS if k in row} for row in eval_rows
+        ],
+        "config": summary_config(cfg, task),
+    }
+
+
+def summary_config(cfg: RunConfig, task: str) -> dict[str, Any]:
+    """The run's config for its summary: ``task`` (a key of ``vdtn-marl train``, which
+    picks one stage) only where the run is one stage; a jocc run's task is the summary's."""
+    config = to_dict(cfg)
+    if task == "jocc":
+        config.pop("task", None)
+    return config

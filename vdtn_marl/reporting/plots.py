@@ -1,0 +1,355 @@
+"""Plots of run results (PNG, written atomically): the κ1 Pareto front of a sweep, a run's
+training curves, error traces and CAM latency CDF, and bars of a metric across methods."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl.io.files import atomic_write_bytes
+from vdtn_marl.reporting.tables import CONFIG_COLUMNS, CONTROL_COST, V2I_THROUGHPUT, is_finite
+
+AXIS_LABELS = {
+    CONTROL_COST: "control cost (dimensionless; lower is better)",
+    V2I_THROUGHPUT: "V2I throughput per link (Mbps)",
+}
+
+
+def pareto_mask(cost: Sequence[float], value: Sequence[float]) -> list[bool]:
+    """True for the points no other point beats: lower-or-equal cost and higher-or-equal value,
+    one of them strictly."""
+    points = list(zip(cost, value, strict=True))
+    mask = []
+    for i, (c_i, v_i) in enumerate(points):
+        dominated = any(
+            c_j <= c_i and v_j >= v_i and (c_j < c_i or v_j > v_i)
+            for j, (c_j, v_j) in enumerate(points)
+            if j != i
+        )
+        mask.append(not dominated)
+    return mask
+
+
+def _label_points(ax: Any, xs: list[float], ys: list[float], labels: list[str]) -> None:
+    """Label points to their right, moving labels up (with a leader line) so that labels of
+    points closer than a line of text apart do not print on top of each other."""
+    import numpy as np
+
+    ax.autoscale_view()
+    pixels = ax.transData.transform(np.column_stack([xs, ys]))
+    per_point = ax.figure.dpi / 72.0  # pixels per typographic point
+    gap = 11.0 * per_point  # one line of 8-point text
+    placed: list[tuple[float, float]] = []  # (x, y) pixels of labels already placed
+    for i in np.argsort(pixels[:, 1], kind="stable"):
+        x_px, y_px = pixels[i]
+        y_label = y_px
+        for px, py in sorted(placed, key=lambda p: p[1]):
+            if abs(px - x_px) < 60.0 * per_point and abs(py - y_label) < gap:
+                y_label = py + gap
+        placed.append((x_px, y_label))
+        shift = (y_label - y_px) / per_point
+        ax.annotate(
+            labels[i], (xs[i], ys[i]), textcoords="offset points", xytext=(8, shift),
+            fontsize=8, va="center",
+            arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.4"} if shift > 1 else None,
+        )  # fmt: skip
+
+
+def plot_kappa1_pareto(
+    table: Any,
+    path: str | Path,
+    x: str = CONTROL_COST,
+    y: str = V2I_THROUGHPUT,
+    title: str = "κ1 sweep: control cost vs V2I throughput",
+    note: str | None = None,
+) -> Path:
+    """Control cost (x) against V2I throughput per link (y), one point per job coloured by κ1;
+    the mean over seeds of each configuration is marked and the Pareto front of the means is
+    drawn. ``note`` is printed small under the axes (e.g. a benchmark's version). Writes a PNG
+    atomically and returns its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    data = table[[c for c in table.columns if c in (x, y, "rra.kappa1", "seed", *CONFIG_COLUMNS)]]
+    data = data[data[x].map(is_finite) & data[y].map(is_finite)].copy()
+    if data.empty:
+        raise ValueError(f"no job has finite values of both {x!r} and {y!r}")
+    has_kappa = "rra.kappa1" in data.columns and data["rra.kappa1"].map(is_finite).all()
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.8), dpi=120)
+    if has_kappa:
+        points = ax.scatter(
+            data[x], data[y], c=data["rra.kappa1"], cmap="viridis", vmin=0.0, vmax=1.0,
+            s=22, alpha=0.55, label="job (one seed)",
+        )  # fmt: skip
+        fig.colorbar(points, ax=ax, label="κ1 (weight of V2I throughput in the RRA reward)")
+    else:
+        ax.scatter(data[x], data[y], s=22, alpha=0.55, label="job")
+
+    # Mean over seeds of every configuration that differs in more than the seed.
+    group_keys = [
+        c for c in CONFIG_COLUMNS if c in data.columns and c != "seed" and data[c].nunique() > 1
+    ]
+    if group_keys:
+        means = data.groupby(group_keys, dropna=False)[[x, y]].mean().reset_index()
+    else:
+        means = data[[x, y]].mean().to_frame().T
+    kappa_means = has_kappa and "rra.kappa1" in means.columns
+    if len(data) > len(means):
+        colour = (
+            {"c": means["rra.kappa1"], "cmap": "viridis", "vmin": 0.0, "vmax": 1.0}
+            if kappa_means
+            else {"facecolors": "none"}
+        )
+        ax.scatter(means[x], means[y], marker="D", s=48, edgecolors="black", linewidths=1.0,
+                   label="mean over seeds", zorder=3, **colour)  # fmt: skip
+    if kappa_means:
+        labels = [f"κ1={k:g}" for k in means["rra.kappa1"]]
+        _label_points(ax, list(means[x]), list(means[y]), labels)
+
+    front = means[pareto_mask(list(means[x]), list(means[y]))].sort_values(x)
+    if len(front) > 1:
+        ax.step(front[x], front[y], where="post", color="black", linestyle="--", linewidth=1,
+                label="Pareto front")  # fmt: skip
+    elif len(means) > 1:  # one configuration dominates every other one
+        ax.scatter(front[x], front[y], marker="*", s=140, facecolors="none", edgecolors="black",
+                   label="Pareto front (dominates all)")  # fmt: skip
+    ax.ticklabel_format(axis="both", style="sci", scilimits=(-3, 4), useOffset=False)
+    ax.set_xlabel(AXIS_LABELS.get(x, x))
+    ax.set_ylabel(AXIS_LABELS.get(y, y))
+    ax.set_title(title)
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    return save_figure(fig, Path(path), note)
+
+
+TRAINING_CURVES_FILE = "training_curves.png"
+ERROR_TRACES_FILE = "error_traces.png"
+LATENCY_CDF_FILE = "cam_latency_cdf.png"
+
+
+def save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
+    """Write ``fig`` as a PNG atomically (``note``: small grey text at the bottom right, e.g.
+    the command) and close it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    if note:
+        fig.subplots_adjust(bottom=fig.subplotpars.bottom + 0.04)
+        fig.text(0.995, 0.005, note, ha="right", va="bottom", fontsize=7, color="0.35")
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png")
+    plt.close(fig)
+    return atomic_write_bytes(path, buffer.getvalue())
+
+
+def pyplot_agg():
+    """matplotlib.pyplot on the file-only Agg backend (no display needed)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+STAGE_LABELS = {
+    "control_perfect": "π* (perfect observation), per 50 ms interval",
+    "control_impaired": "π̃ (impaired observation), per 50 ms interval",
+    "rra": "RRA agents, per 1 ms subframe",
+}
+
+
+def plot_training_curves(
+    metrics_csv: str | Path | Mapping[str, Sequence[str | Path]],
+    path: str | Path,
+    title: str | None = None,
+    note: str | None = None,
+) -> Path:
+    """Mean reward per agent and step of every training stage against its PPO iteration
+    (one panel per stage; the stages' clocks differ, so are their reward scales).
+
+    ``metrics_csv`` is one run's ``metrics.csv``, or ``{label: [metrics.csv, ...]}`` to compare
+    methods: one line per label, the mean over its runs (seeds), shaded between their minimum
+    and maximum."""
+    import numpy as np
+    import pandas as pd
+
+    plt = pyplot_agg()
+    if isinstance(metrics_csv, Mapping):
+        groups = {label: [pd.read_csv(f) for f in files] for label, files in metrics_csv.items()}
+    else:
+        groups = {None: [pd.read_csv(metrics_csv)]}
+    tables = [t for ts in groups.values() for t in ts]
+    stages = list(dict.fromkeys(s for t in tables for s in t["stage"]))
+    if not stages:
+        raise ValueError("no training rows to plot")
+    fig, axes = plt.subplots(1, len(stages), figsize=(4.2 * len(stages), 3.6), dpi=120)
+    axes = [axes] if len(stages) == 1 else list(axes)
+    for ax, stage in zip(axes, stages, strict=True):
+        for label, runs in groups.items():
+            curves = [t[t["stage"] == stage] for t in runs]
+            curves = [c for c in curves if not c.empty]
+            if not curves:
+                continue
+            if label is None:
+                ax.plot(curves[0]["iteration"], curves[0]["reward_mean"], marker=".", linewidth=1)
+                continue
+            joined = pd.concat(curves).groupby("iteration")["reward_mean"]
+            mean, low, high = joined.mean(), joined.min(), joined.max()
+            (line,) = ax.plot(mean.index, mean.values, linewidth=1.2, label=label)
+            if len(curves) > 1:
+                ax.fill_between(
+                    mean.index, np.asarray(low), np.asarray(high), color=line.get_color(),
+                    alpha=max(0.05, 0.3 / len(groups)), linewidth=0,
+                )  # fmt: skip
+        ax.set_title(STAGE_LABELS.get(stage, stage), fontsize=9)
+        ax.set_xlabel("PPO iteration")
+        ax.set_ylabel("mean reward per agent and step")
+        ax.grid(True, alpha=0.3)
+    if any(label is not None for label in groups):
+        handles, labels = axes[-1].get_legend_handles_labels()
+        for ax in axes:  # the legend of the panel with the most lines
+            h, lab = ax.get_legend_handles_labels()
+            if len(h) > len(handles):
+                handles, labels = h, lab
+        fig.legend(handles, labels, loc="upper center", ncol=min(len(labels), 6), fontsize=8,
+                   bbox_to_anchor=(0.5, 1.0))  # fmt: skip
+        fig.tight_layout(rect=(0, 0, 1, 0.9))
+    if title:
+        fig.suptitle(title, fontsize=10, y=0.02, va="bottom")
+    return save_figure(fig, Path(path), note)
+
+
+def plot_error_traces(
+    gap_error_m: Any,
+    speed_error_mps: Any,
+    interval_s: float,
+    path: str | Path,
+    title: str = "platoon errors, evaluation scenario 0",
+) -> Path:
+    """|gap error| (m) and |speed error| (m/s) of every follower over one evaluation scenario;
+    inputs [K, F] (intervals × followers)."""
+    plt = pyplot_agg()
+    import numpy as np
+
+    gap = np.asarray(gap_error_m)
+    speed = np.asarray(speed_error_mps)
+    time_s = np.arange(gap.shape[0]) * interval_s
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.0), dpi=120, sharex=True)
+    for follower in range(gap.shape[1]):
+        top.plot(time_s, gap[:, follower], linewidth=1, label=f"vehicle {follower + 1}")
+        bottom.plot(time_s, speed[:, follower], linewidth=1)
+    top.legend(fontsize=8, ncol=min(gap.shape[1], 4))
+    _label_error_axes(top, bottom, title)
+    return save_figure(fig, Path(path))
+
+
+def _label_error_axes(top: Any, bottom: Any, title: str, what: str = "") -> None:
+    top.set_ylabel(f"|gap error| (m){what}")
+    bottom.set_ylabel(f"|speed error| (m/s){what}")
+    bottom.set_xlabel("time (s)")
+    for ax in (top, bottom):
+        ax.grid(True, alpha=0.3)
+    top.set_title(title, fontsize=10)
+
+
+def plot_error_trace_comparison(
+    traces: Mapping[str, tuple[Any, Any]],
+    interval_s: float,
+    path: str | Path,
+    title: str = "platoon errors on the same evaluation scenario",
+    note: str | None = None,
+) -> Path:
+    """|gap error| (m) and |speed error| (m/s) over one evaluation scenario for several methods
+    (``{label: (gap [K, F], speed [K, F])}``, same scenario and seed): the mean over followers
+    as a line, shaded between the followers' minimum and maximum."""
+    plt = pyplot_agg()
+    import numpy as np
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.0, 5.2), dpi=120, sharex=True)
+    for label, (gap, speed) in traces.items():
+        for ax, values in ((top, np.asarray(gap)), (bottom, np.asarray(speed))):
+            time_s = np.arange(values.shape[0]) * interval_s
+            (line,) = ax.plot(time_s, values.mean(axis=1), linewidth=1.2, label=label)
+            if values.shape[1] > 1:
+                ax.fill_between(time_s, values.min(axis=1), values.max(axis=1),
+                                color=line.get_color(), alpha=0.15, linewidth=0)  # fmt: skip
+    top.legend(fontsize=8, title="line: mean over followers; band: min–max", title_fontsize=7)
+    _label_error_axes(top, bottom, title)
+    return save_figure(fig, Path(path), note)
+
+
+def plot_latency_cdf(
+    latencies_ms: Mapping[str, Any],
+    deadline_ms: float,
+    path: str | Path,
+    title: str | None = None,
+    note: str | None = None,
+) -> Path:
+    """Empirical CDF of delivered CAMs' latency (ms) per method; the interval deadline marked.
+    A method that delivered no CAM has no curve (its label says so in the legend)."""
+    plt = pyplot_agg()
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=120)
+    for label, values in latencies_ms.items():
+        x = np.sort(np.asarray(values, dtype=float))
+        if x.size:
+            ax.step(x, np.arange(1, x.size + 1) / x.size, where="post", label=label)
+        else:
+            ax.plot([], [], linestyle="none", label=f"{label}: no CAM delivered")
+    ax.axvline(deadline_ms, color="black", linestyle="--", linewidth=1, label="interval deadline")
+    ax.set_xlabel("CAM latency (ms)")
+    ax.set_ylabel("fraction of delivered CAMs")
+    ax.set_ylim(0, 1.02)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return save_figure(fig, Path(path), note)
+
+
+def plot_metric_bars(
+    rows: Sequence[Mapping[str, Any]],
+    path: str | Path,
+    ylabel: str,
+    title: str | None = None,
+    note: str | None = None,
+) -> Path:
+    """One bar per method: its mean with the confidence interval as error bar, and each run
+    (seed) as a dot. ``rows``: ``{"label", "mean", "ci_low", "ci_high", "values"}`` each; a
+    row without a finite mean is drawn as an empty slot labelled "n/a"."""
+    plt = pyplot_agg()
+    import numpy as np
+
+    labels = [str(r["label"]) for r in rows]
+    fig, ax = plt.subplots(figsize=(max(5.0, 0.75 * len(rows) + 2.0), 4.2), dpi=120)
+    positions = np.arange(len(rows))
+    for i, row in enumerate(rows):
+        if not is_finite(row.get("mean")):
+            ax.text(i, 0, "n/a", ha="center", va="bottom", fontsize=8)
+            continue
+        mean = float(row["mean"])
+        low = float(row["ci_low"]) if is_finite(row.get("ci_low")) else mean
+        high = float(row["ci_high"]) if is_finite(row.get("ci_high")) else mean
+        ax.bar(i, mean, color=f"C{i % 10}", alpha=0.75, width=0.7)
+        ax.errorbar(i, mean, yerr=[[mean - low], [high - mean]], color="black", capsize=4,
+                    linewidth=1)  # fmt: skip
+        values = [float(v) for v in row.get("values", ()) if is_finite(v)]
+        if values:
+            offsets = np.linspace(-0.15, 0.15, len(values)) if len(values) > 1 else [0.0]
+            ax.scatter(i + np.asarray(offsets), values, s=10, color="black", zorder=3,
+                       alpha=0.6)  # fmt: skip
+    ax.set_xticks(positions)
+    ax.set_xticklabels(labels, rotation=30, ha="right", fontsize=8)
+    ax.set_xlabel("method")
+    ax.set_ylabel(ylabel)
+    ax.grid(True, axis="y", alpha=0.3)
+    if title:
+        ax.set_title(title, fontsize=10)
+    return save_figure(fig, Path(path), note)
