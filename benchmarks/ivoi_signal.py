@@ -72,6 +72,7 @@ from vdtn_marl.benchmarking import (
 from vdtn_marl.config import IVOI_ESTIMATORS
 from vdtn_marl.experiment.jocc import EVAL_SEED_OFFSET, JointOptimisation
 from vdtn_marl.runs import atomic_write_json
+from vdtn_marl.scenarios import scenario_params
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi
 
@@ -367,7 +368,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for path, loop in loaded_checkpoints(args.checkpoints, "ivoi_signal_", console):
         try:
-            params = TwinParams.from_overrides(**loop.cfg.scenario.model_kwargs(), **reward)
+            params = scenario_params(**loop.cfg.scenario.model_kwargs(), **reward)
         except ConfigError as err:
             raise SystemExit(f"--reward: {err}") from err
         runs.append(

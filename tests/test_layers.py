@@ -1,7 +1,7 @@
 """The package's imports form a DAG of rooms, bottom to top (docs/layout.md):
 
-errors → data, runs → sim → core → voi → envs (and the registry) → algos → experiment (config, runs'
-results, benchmark helpers) → leaderboard → cli.
+errors → data, runs → sim → core → voi → scenarios → envs (and the registry) → algos → experiment
+(config, runs' results, benchmark helpers) → leaderboard → cli.
 
 Every ``import`` counts, deferred ones inside functions included. ``__main__`` modules are entry
 scripts that no module imports, so they may reach the command line."""
@@ -24,20 +24,21 @@ LAYERS = {
     "sim": 2,
     "core": 3,
     "voi": 4,
-    "envs": 5,
-    "registry": 5,
-    "": 5,
-    "algos": 6,
-    "rollout": 7,
-    "config": 7,
-    "experiment": 7,
-    "results": 7,
-    "benchmarking": 7,
-    "leaderboard": 8,
-    "cli": 9,
-    "cli_errors": 9,
-    "cli_prepass": 9,
-    "cli_help": 9,
+    "scenarios": 5,
+    "envs": 6,
+    "registry": 6,
+    "": 6,
+    "algos": 7,
+    "rollout": 8,
+    "config": 8,
+    "experiment": 8,
+    "results": 8,
+    "benchmarking": 8,
+    "leaderboard": 9,
+    "cli": 10,
+    "cli_errors": 10,
+    "cli_prepass": 10,
+    "cli_help": 10,
 }
 
 #: Imports that still run up a floor, to be moved by the restructuring. The set must match
