@@ -313,6 +313,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     check_eval_windows(
         s.traces, s.trace_path, s.eval_windows, episodes=e.eval_episodes,
         episode_intervals=p.episode_intervals, control_interval_s=p.platoon.control_interval_s,
+        leaders=p.platoon.topology.num_leaders,
     )  # fmt: skip
     if e.eval_intervals > s.episode_intervals:
         raise ConfigError(

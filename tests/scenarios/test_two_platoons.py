@@ -68,3 +68,13 @@ def test_links_of_the_two_platoons_interfere_on_a_shared_subchannel():
         out = link.subframe_step(twin.tables, 0, actions, state, twin._decode, twin._const)
         bits.append(out.v2v_bits[:, a])
     assert bool((bits[1] < bits[0]).all())
+
+
+def test_disjoint_evaluation_needs_a_trace_window_per_leader():
+    cfg = RunConfig()
+    base = replace(cfg.scenario, traces="udds", eval_windows="disjoint")
+    experiment = replace(cfg.experiment, eval_episodes=8)  # udds's eval part holds 13 windows
+    validate(replace(cfg, scenario=base, experiment=experiment))  # one platoon: 8 windows
+    two = replace(base, kind="two_platoons", num_vehicles=8)
+    with pytest.raises(ConfigError, match=r"holds 13 disjoint .*eval_episodes=8 × 2 leaders"):
+        validate(replace(cfg, scenario=two, experiment=experiment))
