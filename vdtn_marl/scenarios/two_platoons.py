@@ -25,8 +25,8 @@ from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.topology import LEADER, Topology
 
 LANE_WIDTH_M = 4.0
-"""Lateral distance between the two platoons' lanes (m): the highway lane width of 3GPP
-TR 36.885 (Table A.1.2-1)."""
+"""Lateral distance between the two platoons' lanes (m): the lane width of 3GPP TR 36.885's
+highway layout (Annex A.1.2)."""
 SECOND_LEADER_OFFSET_M = 0.0
 """Where the second platoon's leader starts along the road relative to the first's (m)."""
 
