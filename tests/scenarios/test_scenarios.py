@@ -240,3 +240,45 @@ def test_an_unknown_scenario_is_one_clear_error():
     cfg = RunConfig()
     with pytest.raises(ConfigError, match=f"scenario.kind='nowhere' .* {allowed}"):
         validate(replace(cfg, scenario=replace(cfg.scenario, kind="nowhere")))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_the_oracles_model_every_topology_as_the_twin_moves_it(name):
+    from vdtn_marl.algos.exact_oracle import ExactOracleController
+    from vdtn_marl.algos.mpc_oracle import OracleController
+    from vdtn_marl.sim.platoon import control_reward, gaps_m, spacing_errors
+
+    intervals = 20
+    kw = {**model_kwargs(name), "episode_intervals": intervals, "traces": "synthetic"}
+    params = scenario_params(**kw)
+    pp, f = params.platoon, params.platoon.num_followers
+    # the exact oracle's plan, replayed, earns what its linear program predicted
+    twin = DigitalTwin(params, batch_size=2, seed=11, radio=False)
+    oracle = ExactOracleController(tail_intervals=0)
+    predicted = [oracle.solve(twin, b).planned_cost for b in range(2)]
+    bound, earned = oracle.bind(twin), torch.zeros(2, dtype=torch.float64)
+    for _ in range(intervals):
+        record = twin.finish_interval(bound(twin.vehicle_observation(True)), perfect=True)
+        twin.begin_interval()
+        earned += record.reward.double().sum(-1)
+        assert not bool(record.collided.any())
+    # to the solver's tolerance (about 1e-4 of cost here, 0.5 % of an episode of 20 intervals)
+    np.testing.assert_allclose(-earned.numpy(), predicted, rtol=1e-3, atol=2e-4)
+    assert min(predicted) > 0.01
+    # the MPC oracle's planned return of a command plan is the twin's own
+    twin = DigitalTwin(params, batch_size=3, seed=5, radio=False)
+    gen = torch.Generator().manual_seed(0)
+    plan = torch.rand(3, 10, f, generator=gen) * 2.0 - 1.0
+    state, expected = twin.platoon, torch.zeros(3)
+    follower = pp.topology.followers_of
+    for k in range(10):
+        leader = twin.leader_accel_mps2(twin.interval + k)  # [B, Λ]
+        after = twin.integrator.integrate(state, leader, plan[:, k], torch.zeros(3, f).long())
+        gap_error, speed_error = spacing_errors(after, pp)
+        reward = control_reward(
+            gap_error, speed_error, follower(after.command_mps2), follower(state.command_mps2), pp
+        )
+        reward = reward + (gaps_m(after.position_m, pp) <= 0).float() * pp.collision_penalty
+        expected, state = expected + reward.sum(-1), after
+    got = OracleController(horizon_intervals=10).planned_return(twin, plan)
+    torch.testing.assert_close(got, expected, atol=1e-3, rtol=1e-4)

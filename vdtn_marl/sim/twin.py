@@ -11,6 +11,11 @@ Life cycle of one control interval k (docs/model.md §1, §4.5):
 4. :meth:`DigitalTwin.finish_interval` — the platoon is integrated over the interval with the
    command switching from u_{k−1} to u_k when CAM_k arrived, and the control reward is paid.
 
+Who leads, whom each follower follows and hears its CAM from, the V2I users and the lanes come
+from ``params.platoon.topology`` (:class:`~vdtn_marl.sim.topology.Topology`, built by a
+scenario; by default one platoon with predecessor following), as index arrays. Each leader
+drives its own window of the trace set: ``leader_speed_mps`` is [B, Λ, K].
+
 The twin knows nothing of RL APIs. Every random number comes from one seeded
 ``torch.Generator`` on the twin's device.
 
