@@ -133,8 +133,9 @@ def initial_state(
         spacing = spacing + (params.initial_gap_noise_m * noise).clamp(
             -0.5 * params.standstill_gap_m, None
         )
-    # distance behind the leader: the spacings along each chain, summed exactly in float64
-    # (as torch's CPU cumsum accumulates float32), then rounded once
+    # distance behind the leader: the spacings along each chain, summed in float64 and rounded
+    # once, as torch's CPU cumsum of float32 does (such sums are exact in float64, so the
+    # order of the terms does not change a bit)
     chain = torch.as_tensor(topology.chain_matrix(), device=dev)
     behind = (spacing.double() @ chain.T).float()  # [B, F]
     start = torch.tensor(topology.leader_position_m or (0.0,) * topology.num_leaders, device=dev)
