@@ -72,7 +72,7 @@ def parse_args(argv=None) -> argparse.Namespace:
 def link_geometry(params: TwinParams, speed_mps: float) -> tuple[float, float]:
     """(V2V link distance in m, its path loss in dB) at the desired gap for ``speed_mps``."""
     pp = params.platoon
-    gap_m = desired_gaps_m(torch.tensor([[speed_mps, speed_mps]]), pp)  # one follower
+    gap_m = desired_gaps_m(torch.full((1, pp.num_vehicles), speed_mps), pp)  # every follower
     distance_m = pp.vehicle_length_m + float(gap_m[0, 0])
     loss_db = channel.v2v_pathloss_db(torch.tensor([distance_m]), params.radio)
     return distance_m, float(loss_db[0])

@@ -73,6 +73,7 @@ from vdtn_marl.reporting.benchmarking import (
     provenance,
     table_console,
 )
+from vdtn_marl.scenarios import scenario_params
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import expected_voi
 
@@ -368,7 +369,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = []
     for path, loop in loaded_checkpoints(args.checkpoints, "ivoi_signal_", console):
         try:
-            params = TwinParams.from_overrides(**loop.cfg.scenario.model_kwargs(), **reward)
+            params = scenario_params(**loop.cfg.scenario.model_kwargs(), **reward)
         except ConfigError as err:
             raise SystemExit(f"--reward: {err}") from err
         runs.append(

@@ -328,6 +328,7 @@ def test_group_options_as_documented():
         "platoon16",
         "platoon4_1mhz",
         "platoon4_noise90",
+        "two_platoons",
     }
     assert set(cli_help.group_options("algo")) == {"mappo", "ippo"}
     # one YAML per learned-RRA reward and per registered baseline, and no other
@@ -345,7 +346,7 @@ def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
     from hydra import compose, initialize_config_module
 
     from vdtn_marl.experiment.config import ScenarioConfig, register_configs
-    from vdtn_marl.sim.params import TwinParams
+    from vdtn_marl.scenarios import scenario_params
 
     register_configs()
     with initialize_config_module(config_module="vdtn_marl.conf", version_base="1.3"):
@@ -359,7 +360,7 @@ def test_scenarios_match_the_case_study(tmp_path, monkeypatch, capsys):
         assert noisy.subchannel_bandwidth_hz == 180e3 and noisy.num_vehicles == 4
         assert dict(noisy.model) == {"noise_power_override_dbm": -90.0}
         kwargs = ScenarioConfig(model=dict(noisy.model)).model_kwargs()
-        assert TwinParams.from_overrides(**kwargs).radio.noise_power_dbm == -90.0
+        assert scenario_params(**kwargs).radio.noise_power_dbm == -90.0
         assert compose("config", ["rra=throughput"]).rra.kappa1 == 1.0
 
 

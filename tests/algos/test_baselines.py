@@ -319,7 +319,7 @@ def test_causal_mpc_ignores_the_leader_future_and_the_oracle_uses_it():
 
     def braking_future(intervals):  # same present, a hard brake 10 intervals ahead
         accel = true_future(intervals)
-        return torch.where(intervals >= twin.interval[:, None] + 10, -3.0, accel)
+        return torch.where((intervals >= twin.interval[:, None] + 10)[..., None], -3.0, accel)
 
     commands = {}
     for name in ("oracle", "causal_mpc"):
@@ -345,7 +345,7 @@ def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
     # after the preview: the last previewed acceleration decaying with 3 s time constant
     elapsed_s = (torch.arange(horizon - known) + 0.5) * twin.params.platoon.control_interval_s
     torch.testing.assert_close(
-        planned[:, known:], trace[:, known - 1 : known] * torch.exp(-elapsed_s / 3.0)
+        planned[:, known:], trace[:, known - 1 : known] * torch.exp(-elapsed_s / 3.0)[:, None]
     )
     full = OracleController(horizon_intervals=horizon, preview_intervals=horizon)
     torch.testing.assert_close(full._planned_leader_accel(twin), trace)
@@ -353,9 +353,9 @@ def test_partial_preview_knows_the_trace_only_as_far_as_it_previews():
     assert causal.preview_intervals == 0 and not causal.leader_preview
     assert full.leader_preview and OracleController().preview_intervals == 120
     elapsed_s = (torch.arange(horizon) + 0.5) * twin.params.platoon.control_interval_s
-    torch.testing.assert_close(  # the present acceleration, decaying
+    torch.testing.assert_close(  # the present acceleration, decaying: [B, H, Λ = 1]
         causal._planned_leader_accel(twin),
-        twin.platoon.accel_mps2[:, :1] * torch.exp(-elapsed_s / 3.0),
+        twin.platoon.accel_mps2[:, :1, None] * torch.exp(-elapsed_s / 3.0)[:, None],
     )
     for bad in (-1, horizon + 1, 2.5, True):
         with pytest.raises(ValueError, match=r"preview_intervals=.*\[0, horizon_intervals=30\]"):

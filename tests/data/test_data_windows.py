@@ -178,7 +178,7 @@ def test_jocc_evaluates_on_disjoint_windows_when_asked():
     default = replace(cfg, scenario=replace(cfg.scenario, eval_windows="random"))
     assert isinstance(trace_sources(default)[1], ProfileTraceSource)
     twin = DigitalTwin(batch_size=16, seed=5, trace_source=evaluation, radio=False)
-    leader = twin.leader_speed_mps
+    leader = twin.leader_speed_mps[:, 0]  # [B, Λ, K]: the platoon's one leader
     assert leader.shape == (16, twin.params.episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS)
     assert len({tuple(row.tolist()) for row in leader}) == 16
 

@@ -212,18 +212,18 @@ def _error_coordinates(state, params):
 
 
 def test_error_coordinate_matrices_match_integrator_for_single_subframe():
-    params = PlatoonParams(subframes_per_interval=1)
+    params = PlatoonParams(num_vehicles=3, subframes_per_interval=1)
     dt, h, tau = params.control_interval_s, params.time_headway_s, params.driveline_lag_s
     a_mat = torch.tensor([[1, dt, -h * dt], [0, 1, -dt], [0, 0, 1 - dt / tau]])
     b_vec = torch.tensor([0, 0, dt / tau])
     c_vec = torch.tensor([0, dt, 0])
     state = _state([0.0, -9.0, -17.5], [25.0, 24.0, 24.6], [0.0, 0.4, -0.3], [0.0, 0.1, -0.2])
-    leader_accel, u = torch.tensor([0.8]), torch.tensor([[1.2, -0.7]])
+    leader_accel, u = torch.tensor([[0.8]]), torch.tensor([[1.2, -0.7]])
     after = IntervalIntegrator(params, "cpu").integrate(
         state, leader_accel, u, torch.zeros(1, 2, dtype=torch.long)
     )
     x, x_next = _error_coordinates(state, params)[0], _error_coordinates(after, params)[0]
-    pred_accel = torch.stack([leader_accel[0], state.accel_mps2[0, 1]])
+    pred_accel = torch.stack([leader_accel[0, 0], state.accel_mps2[0, 1]])
     expected = x @ a_mat.T + u[0, :, None] * b_vec + pred_accel[:, None] * c_vec
     assert torch.allclose(x_next, expected, atol=1e-5)
 
@@ -233,7 +233,9 @@ def test_per_subframe_integration_agrees_with_matrices_to_first_order():
 
     def discrepancy(interval_s):
         params = PlatoonParams(
-            control_interval_s=interval_s, subframes_per_interval=round(interval_s / 1e-3)
+            num_vehicles=2,
+            control_interval_s=interval_s,
+            subframes_per_interval=round(interval_s / 1e-3),
         )
         dt, h, tau = interval_s, params.time_headway_s, params.driveline_lag_s
         a_mat = torch.tensor(
@@ -242,7 +244,7 @@ def test_per_subframe_integration_agrees_with_matrices_to_first_order():
         state = _state([0.0, -9.0], [25.0, 24.0], [0.0, 0.5], [0.0, 0.5])
         u = torch.tensor([[2.0]])
         after = IntervalIntegrator(params, "cpu").integrate(
-            state, torch.tensor([0.0]), u, torch.zeros(1, 1, dtype=torch.long)
+            state, torch.tensor([[0.0]]), u, torch.zeros(1, 1, dtype=torch.long)
         )
         x = _error_coordinates(state, params)[0, 0].double()
         euler = a_mat @ x + torch.tensor([0, 0, dt / tau], dtype=torch.float64) * 2.0
@@ -256,12 +258,12 @@ def test_per_subframe_integration_agrees_with_matrices_to_first_order():
 
 @pytest.mark.parametrize("switch", [0, 7, 49, 50])
 def test_delayed_command_switch_inside_interval(switch):
-    params = PlatoonParams()
+    params = PlatoonParams(num_vehicles=2)
     t, dt, tau = params.subframes_per_interval, params.subframe_s, params.driveline_lag_s
     state = _state([0.0, -9.0], [20.0, 20.5], [0.3, -0.4], [0.3, -1.0])
     u_new = 1.5
     after = IntervalIntegrator(params, "cpu").integrate(
-        state, torch.tensor([0.3]), torch.tensor([[u_new]]), torch.tensor([[switch]])
+        state, torch.tensor([[0.3]]), torch.tensor([[u_new]]), torch.tensor([[switch]])
     )
     p, v, a = -9.0, 20.5, -0.4  # brute-force reference: explicit Euler with a ZOH switch
     for s in range(t):

@@ -145,8 +145,10 @@ def build_program(
     )
 
     rows, cols, vals = [], [], []
-    has_pred = follower > 0  # the predecessor is a follower (a variable), else the leader
-    pred = np.maximum(follower - 1, 0)
+    # the predecessor is a follower (a variable), else a leader (a constant, in the rhs)
+    follows_leader = np.asarray(params.topology.follows_leader)
+    has_pred = ~follows_leader[follower]
+    pred = _predecessor_rows(params)[follower]
     pred_coef = np.where(has_pred, 1.0, 0.0)
     row_count = 0
 
@@ -196,6 +198,13 @@ def build_program(
     return _Program(horizon, f, a_eq, a_ub, cost, bounds)
 
 
+def _predecessor_rows(params: PlatoonParams) -> np.ndarray:
+    """For each follower [F], the follower row of its predecessor (0 where it is a leader)."""
+    topology = params.topology
+    row = {v: f for f, v in enumerate(topology.followers)}
+    return np.array([row.get(p, 0) for p in topology.link_tx], dtype=np.int64)
+
+
 def _right_hand_sides(
     program: _Program,
     params: PlatoonParams,
@@ -206,8 +215,9 @@ def _right_hand_sides(
     command_mps2: np.ndarray,
     margin_m: float,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """b_eq and b_ub of one scenario: leader trajectory [H] (after each interval), follower
-    state [F, 3] (p relative to the leader's present position, v, a) and commands [F]."""
+    """b_eq and b_ub of one scenario: the leaders' trajectories [H, Λ] (after each interval,
+    each relative to its present position), follower state [F, 3] (p relative to its leader's
+    present position, v, a) and commands [F]."""
     h, f = program.horizon, program.followers
     n = h * f
     step, follower = _indices(h, f)
@@ -216,9 +226,11 @@ def _right_hand_sides(
     z1 = state @ phi.T  # [F, 3]: Φ z_0, the free part of the first interval
     for c in range(3):
         b_eq[c * n : (c + 1) * n][first] = z1[follower[first], c]
-    leads = follower == 0
-    lead_p = np.where(leads, leader_position_m[step], 0.0)
-    lead_v = np.where(leads, leader_speed_mps[step], 0.0)
+    topology = params.topology
+    leads = np.asarray(topology.follows_leader)[follower]  # the predecessor is a leader
+    lead = np.asarray(topology.leader_of)[list(topology.followers)][follower]
+    lead_p = np.where(leads, leader_position_m[step, lead], 0.0)
+    lead_v = np.where(leads, leader_speed_mps[step, lead], 0.0)
     # each |e| ≤ t row pair reads ±(linear part) − t ≤ ∓(constant part)
     gap_const = lead_p - params.vehicle_length_m
     e_p_const = gap_const - params.standstill_gap_m
@@ -344,18 +356,23 @@ class ExactOracleController:
         intervals[scenario] = interval + np.arange(horizon)
         if not isinstance(twin.interval, np.ndarray):
             intervals = torch.as_tensor(intervals, device=twin.device)
-        lead_a = _as_numpy(twin.leader_accel_mps2(intervals)[scenario])
-        # the leader as IntervalIntegrator moves it, relative to its present position (m)
+        lead_a = _as_numpy(twin.leader_accel_mps2(intervals)[scenario])  # [H, Λ]
+        # every leader as IntervalIntegrator moves it, relative to its present position (m)
         dt = pp.control_interval_s
-        lead_p, lead_v = np.empty(horizon), np.empty(horizon)
-        p, v = 0.0, float(speed[0])
+        topology = pp.topology
+        leaders, followers = list(topology.leaders), list(topology.followers)
+        lead_p, lead_v = np.empty((horizon, len(leaders))), np.empty((horizon, len(leaders)))
+        p, v = np.zeros(len(leaders)), speed[leaders].astype(np.float64)
         for h in range(horizon):  # float64 recursion with the twin's clamp at 0 m/s
             p = p + dt * v + integ.leader_pos_gain * lead_a[h]
-            v = max(v + dt * lead_a[h], 0.0)
+            v = np.maximum(v + dt * lead_a[h], 0.0)
             lead_p[h], lead_v[h] = p, v
-        follower_state = np.stack([position[1:] - position[0], speed[1:], accel[1:]], axis=-1)
+        head = position[leaders][list(topology.leader_of)]  # [N]: each vehicle's leader's
+        follower_state = np.stack(
+            [position[followers] - head[followers], speed[followers], accel[followers]], axis=-1
+        )
         b_eq, b_ub = _right_hand_sides(
-            program, pp, phi, lead_p, lead_v, follower_state, command[1:], self.margin_m
+            program, pp, phi, lead_p, lead_v, follower_state, command[followers], self.margin_m
         )
         args = dict(A_ub=program.a_ub, b_ub=b_ub, A_eq=program.a_eq, b_eq=b_eq)
         failures = []

@@ -239,6 +239,7 @@ class OracleController:
     def _context(self, twin: DigitalTwin, switch_subframe: torch.Tensor | None) -> dict:
         """Everything the objective needs that does not depend on the plan (time-major)."""
         pp = twin.params.platoon
+        topology = pp.topology
         integ = twin.integrator
         h_max = self.horizon_intervals
         state: PlatoonState = twin.platoon
@@ -247,19 +248,22 @@ class OracleController:
         mats = self._matrices(twin)
         powers = mats["powers"]
 
-        # the leader as IntervalIntegrator moves it, relative to its current position (m)
+        # every leader as IntervalIntegrator moves it, relative to its current position (m)
         steps = torch.arange(h_max, device=dev)
-        lead_a = self._planned_leader_accel(twin).to(dtype).T  # [H, B]
+        lead_a = self._planned_leader_accel(twin).to(dtype).transpose(0, 1)  # [H, B, Λ]
         dt = pp.control_interval_s
-        lead_v = (state.speed_mps[:, 0].to(dtype) + dt * lead_a.cumsum(0)).clamp_min(0.0)
-        v_before = torch.cat([state.speed_mps[None, :, 0].to(dtype), lead_v[:-1]], dim=0)
+        lead_v0 = topology.leaders_of(state.speed_mps).to(dtype)  # [B, Λ]
+        lead_v = (lead_v0 + dt * lead_a.cumsum(0)).clamp_min(0.0)
+        v_before = torch.cat([lead_v0[None], lead_v[:-1]], dim=0)
         lead_p = (dt * v_before + integ.leader_pos_gain * lead_a).cumsum(0)
 
+        # followers' positions relative to their own leader's
+        head = topology.leaders_of(state.position_m)[:, list(topology.leader_of)]  # [B, N]
         z0 = torch.stack(
             [
-                (state.position_m[:, 1:] - state.position_m[:, :1]).to(dtype),
-                state.speed_mps[:, 1:].to(dtype),
-                state.accel_mps2[:, 1:].to(dtype),
+                (topology.followers_of(state.position_m) - topology.followers_of(head)).to(dtype),
+                topology.followers_of(state.speed_mps).to(dtype),
+                topology.followers_of(state.accel_mps2).to(dtype),
             ],
             dim=-1,
         )  # [B, F, 3]
@@ -277,10 +281,10 @@ class OracleController:
             # response to (u_{k−1} − u_k) in the first interval: Φ^h (G_T − G_{T−d})
             switch_gap = torch.einsum("hcd,bfd->chbf", powers[:-1, :2], gain_gap).contiguous()
         return {
-            "lead_p": lead_p[..., None],  # [H, B, 1]
-            "lead_v": lead_v[..., None],
+            "lead_p": lead_p,  # [H, B, Λ]
+            "lead_v": lead_v,
             "free": free,
-            "u_prev": state.command_mps2[:, 1:].to(dtype),  # [B, F]
+            "u_prev": topology.followers_of(state.command_mps2).to(dtype),  # [B, F]
             "switch_gap": switch_gap,
             "weights": self.discount ** steps.to(dtype)[:, None],  # [H, 1]
             "params": pp,
@@ -293,15 +297,21 @@ class OracleController:
         """(true planned return [B], differentiable loss) of a time-major plan [H, B, F]
         whose forced response (position, speed) is ``moved`` [2, H, B, F]."""
         pp: PlatoonParams = ctx["params"]
+        topology = pp.topology
         h_max, b, f = plan.shape
+        leaders = topology.num_leaders
         z = ctx["free"] + moved
         if ctx["switch_gap"] is not None:
             z = z + ctx["switch_gap"] * (ctx["u_prev"] - plan[0])
-        position = torch.cat([ctx["lead_p"], z[0]], dim=-1).view(h_max * b, f + 1)
-        speed = torch.cat([ctx["lead_v"], z[1]], dim=-1).view(h_max * b, f + 1)
+        position = topology.assemble(
+            ctx["lead_p"].reshape(h_max * b, leaders), z[0].reshape(h_max * b, f)
+        )  # [H·B, N]
+        speed = topology.assemble(
+            ctx["lead_v"].reshape(h_max * b, leaders), z[1].reshape(h_max * b, f)
+        )
         gap = gaps_m(position, pp)  # [H·B, F]
         gap_error = gap - desired_gaps_m(speed, pp)
-        speed_error = speed[:, :-1] - speed[:, 1:]
+        speed_error = topology.predecessors_of(speed) - topology.followers_of(speed)
         prev = torch.cat([ctx["u_prev"][None], plan[:-1]], dim=0)
         reward = control_reward(
             gap_error.view(h_max, b, f), speed_error.view(h_max, b, f), plan, prev, pp
@@ -319,7 +329,8 @@ class OracleController:
         return self._objective(ctx, plan, moved)
 
     def _planned_leader_accel(self, twin: DigitalTwin) -> torch.Tensor:
-        """The leader's acceleration (m/s²) over the horizon as the plan assumes it, [B, H].
+        """Every leader's acceleration (m/s²) over the horizon as the plan assumes it,
+        [B, H, Λ].
 
         The trace's for the first ``preview_intervals`` intervals; after them the last known
         acceleration (the present one without preview) decaying exponentially with time
@@ -330,13 +341,13 @@ class OracleController:
         if known == self.horizon_intervals:
             return twin.leader_accel_mps2(twin.interval[:, None] + steps)
         if known == 0:
-            last = twin.platoon.accel_mps2[:, :1]
+            last = twin.params.platoon.topology.leaders_of(twin.platoon.accel_mps2)[:, None]
         else:
             preview = twin.leader_accel_mps2(twin.interval[:, None] + steps[:known])
             last = preview[:, -1:]
         ahead = steps[known:] - known
         dt = twin.params.platoon.control_interval_s
-        elapsed_s = (ahead + 0.5).to(last.dtype) * dt
+        elapsed_s = (ahead[:, None] + 0.5).to(last.dtype) * dt  # [H − known, 1]
         tail = last * torch.exp(-elapsed_s / self.leader_accel_decay_s)
         return tail if known == 0 else torch.cat([preview.to(tail.dtype), tail], dim=1)
 
@@ -346,7 +357,7 @@ class OracleController:
         policy = self.reference or CACCController(pp)
         state = twin.platoon
         lead_a = self._planned_leader_accel(twin)
-        zero = torch.zeros_like(state.command_mps2[:, 1:], dtype=torch.long)
+        zero = torch.zeros_like(pp.topology.followers_of(state.command_mps2), dtype=torch.long)
         plan = []
         for h in range(self.horizon_intervals):
             u = policy(perfect_observation(state, pp)).clamp(pp.accel_min_mps2, pp.accel_max_mps2)

@@ -19,7 +19,7 @@ COMMANDS = {
     "rollout": "a short random-policy rollout of an environment (quick start)",
 }
 GROUPS = {
-    "scenario": "the simulated platoon and radio (size, sub-channels, bandwidth, traces)",
+    "scenario": "the simulated world: platoon(s), radio, traces (vdtn_marl/scenarios/)",
     "algo": "the MARL learner",
     "control": "who drives the followers",
     "rra": "who allocates radio resources, and the RRA reward",

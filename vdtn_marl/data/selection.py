@@ -127,12 +127,13 @@ def check_eval_windows(
     episodes: int,
     episode_intervals: int,
     control_interval_s: float,
+    leaders: int = 1,
 ) -> None:
     """Raise :class:`ConfigError` naming ``scenario.eval_windows`` when ``disjoint`` is asked
     for and the eval part holds fewer disjoint windows of an episode and the look-ahead
-    (``episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS`` points) than the ``episodes`` that
-    evaluation draws; the message names both numbers. The trace settings must be valid
-    (:func:`check_trace_settings`)."""
+    (``episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS`` points) than evaluation draws: one per
+    leader of each of the ``episodes`` scenarios; the message names both numbers. The trace
+    settings must be valid (:func:`check_trace_settings`)."""
     check_eval_windows_value(eval_windows)
     if eval_windows == "random":
         return
@@ -144,12 +145,13 @@ def check_eval_windows(
         return
     num_points = episode_intervals + 1 + EVAL_LOOKAHEAD_INTERVALS
     available = evaluation.count(num_points, control_interval_s)
-    if available < episodes:
+    if available < episodes * leaders:
         span = (num_points - 1) * control_interval_s
+        needed = f"{episodes}" if leaders == 1 else f"{episodes} × {leaders} leaders"
         raise ConfigError(
             f"scenario.eval_windows=disjoint: the eval part of scenario.traces={traces!r} holds "
             f"{available} disjoint windows of {span:g} s (episode and look-ahead), "
-            f"experiment.eval_episodes={episodes} needed; use scenario.eval_windows=random, "
+            f"experiment.eval_episodes={needed} needed; use scenario.eval_windows=random, "
             "fewer episodes or a larger trace set"
         )
 

@@ -16,21 +16,14 @@ from pettingzoo import ParallelEnv
 
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
+from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario, rra_name, vehicle_name
+from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord, resolve_device
 
 RENDER_MODES = ("rgb_array",)
 
-
-def vehicle_name(follower: int) -> str:
-    """Agent name of follower ``follower`` (1-based)."""
-    return f"vehicle_{follower}"
-
-
-def rra_name(link_index: int) -> str:
-    """Agent name of the RRA agent of V2V link ``link_index`` (1-based: link i feeds follower i)."""
-    return f"rra_{link_index}"
+__all__ = ["rra_name", "vehicle_name"]  # agent names, defined with the scenarios
 
 
 def vehicle_observation_space(twin: DigitalTwin) -> gymnasium.spaces.Box:
@@ -119,7 +112,9 @@ class VDTNParallelEnv(EngineBacked, ParallelEnv):
 
     Model parameters are keyword arguments (any field of
     :class:`~vdtn_marl.sim.params.PlatoonParams` / ``RadioParams``, plus ``episode_intervals``
-    and ``traces``), e.g. ``make("vdtn/platoon-control-v0", num_vehicles=6)``.
+    and ``traces``), e.g. ``make("vdtn/platoon-control-v0", num_vehicles=6)``. ``scenario``
+    names the world (:data:`vdtn_marl.scenarios.SCENARIOS`; default ``"platoon"``, one
+    platoon with predecessor following), e.g. ``scenario="two_platoons", num_vehicles=8``.
     """
 
     metadata = {"render_modes": list(RENDER_MODES), "render_fps": 20, "is_parallelizable": True}
@@ -132,13 +127,15 @@ class VDTNParallelEnv(EngineBacked, ParallelEnv):
         render_mode: str | None = None,
         device: str = "cpu",
         trace_source: TraceSource | None = None,
+        scenario: str | Scenario = DEFAULT_SCENARIO,
         **model_kwargs,
     ):
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ConfigError(f"render_mode={render_mode!r} must be None or one of {RENDER_MODES}")
         self.render_mode = render_mode
         check_one_trace_choice(trace_source, model_kwargs)
-        params = TwinParams.from_overrides(**model_kwargs)
+        self.scenario = get_scenario(scenario)
+        params = self.scenario.twin_params(**model_kwargs)
         backend = "numpy" if resolve_device(device).type == "cpu" else "torch"
         self.twin = DigitalTwin(
             params,

@@ -1,6 +1,8 @@
 """Platoon control environments: ``vdtn/platoon-control-v0`` and ``-impaired-v1``.
 
-One step is one control interval (Δt = 50 ms). Agents ``vehicle_1..vehicle_{N−1}``.
+One step is one control interval (Δt = 50 ms). Agents ``vehicle_1..vehicle_{N−1}`` (one per
+follower, named by vehicle id: ``vehicle_1..3, vehicle_5..7`` with ``scenario="two_platoons"``
+and N = 8).
 
 =================  ==========================================================================
 observation        Box(8) float32: gap error (m), speed error (m/s), own acceleration (m/s²),
@@ -48,7 +50,6 @@ from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
     vehicle_action_space,
-    vehicle_name,
     vehicle_observation_space,
 )
 from vdtn_marl.envs.policies import RandomRRAPolicy
@@ -114,7 +115,7 @@ class PlatoonControlEnv(VDTNParallelEnv):
             **self.metadata,
             "name": "platoon_control_impaired_v1" if impaired else "platoon_control_v0",
         }
-        self.possible_agents = [vehicle_name(i + 1) for i in range(self.twin.num_followers)]
+        self.possible_agents = self.scenario.vehicle_agents(self.twin.topology)
         self.agents: list[str] = []
         rra_policy = rra_policy or RandomRRAPolicy(self.twin.params.radio.num_actions, seed)
         self.engine = IntervalEngine(  # with radio (impaired) it runs each interval's T subframes

@@ -1,7 +1,8 @@
 """``rgb_array`` rendering of a digital twin (scenario 0 only).
 
-Top panel: the road, vehicles drawn to scale at their positions relative to the leader, each gap
-annotated with its gap error and the follower's speed. Bottom panel: one bar per V2V link with
+Top panel: the road, vehicles drawn to scale at their positions relative to the (first) leader,
+one drawn lane per lane of the scenario, each gap annotated with its gap error and the
+follower's speed. Bottom panel: one bar per V2V link with
 the fraction of the current CAM delivered in this interval, coloured by state; for a twin without
 radio (perfect observation) the panel says so instead.
 
@@ -47,37 +48,51 @@ def _last_subchannels(twin) -> np.ndarray | None:
 
 def _draw_road(ax, twin, record) -> None:
     pp = twin.params.platoon
+    topology = pp.topology
     state = twin.platoon
     pos = _np(state.position_m)[0].astype(float)
     speed = _np(state.speed_mps)[0].astype(float)
-    x = pos - pos[0]  # leader at 0, followers behind (negative)
+    x = pos - pos[topology.leaders[0]]  # the first leader at 0, followers behind (negative)
     length = pp.vehicle_length_m
-    gaps = x[:-1] - x[1:] - length
-    desired = pp.standstill_gap_m + pp.time_headway_s * speed[1:]
+    followers = list(topology.followers)
+    predecessor = list(topology.link_tx)
+    gaps = x[predecessor] - x[followers] - length
+    desired = pp.standstill_gap_m + pp.time_headway_s * speed[followers]
     gap_error = gaps - desired
     collided = gaps <= 0
     if record is not None:
         collided = collided | _np(record.collided)[0].astype(bool)
 
-    lane_y, car_h = 0.0, 1.8
+    # one drawn lane per lateral offset, the lane nearest the base stations on top
+    offsets = topology.lateral_offset_m or (0.0,) * topology.num_vehicles
+    lane_of = {y: k for k, y in enumerate(sorted(set(offsets)))}
+    car_h, lane_h = 1.8, 7.5
+    lane_y = [lane_of[y] * lane_h for y in offsets]
     left = float(x.min() - length - 2.0)
     right = float(max(x.max(), 0.0) + 3.0)
-    ax.axhspan(lane_y - 0.8, lane_y + car_h + 2.6, color="#e8e8e8", zorder=0)
-    ax.axhline(lane_y - 0.8, color="black", lw=1.0)
-    ax.axhline(lane_y + car_h + 2.6, color="black", lw=1.0)
+    for k in range(len(lane_of)):
+        ax.axhspan(k * lane_h - 0.8, k * lane_h + car_h + 2.6, color="#e8e8e8", zorder=0)
+        ax.axhline(k * lane_h - 0.8, color="black", lw=1.0)
+        ax.axhline(k * lane_h + car_h + 2.6, color="black", lw=1.0)
+    row = {v: f for f, v in enumerate(followers)}
     for i, front in enumerate(x):
-        if i == 0:
-            colour = LEADER_COLOUR
+        if i in row:
+            colour = COLLIDED_COLOUR if collided[row[i]] else FOLLOWER_COLOUR
         else:
-            colour = COLLIDED_COLOUR if collided[i - 1] else FOLLOWER_COLOUR
+            colour = LEADER_COLOUR
         ax.add_patch(
             Rectangle(
-                (front - length, lane_y), length, car_h, facecolor=colour, edgecolor="black", lw=0.8
+                (front - length, lane_y[i]),
+                length,
+                car_h,
+                facecolor=colour,
+                edgecolor="black",
+                lw=0.8,
             )
         )
         ax.text(
             front - length / 2,
-            lane_y + car_h / 2,
+            lane_y[i] + car_h / 2,
             str(i),
             ha="center",
             va="center",
@@ -85,37 +100,37 @@ def _draw_road(ax, twin, record) -> None:
             fontsize=8,
             fontweight="bold",
         )
-    ax.text(
-        x[0] - length / 2,
-        lane_y - 1.1,
-        f"leader\n{speed[0]:.1f} m/s",
-        ha="center",
-        va="top",
-        fontsize=7,
-    )
-    for i in range(len(gaps)):
-        mid = (x[i] - length + x[i + 1]) / 2
-        colour = COLLIDED_COLOUR if collided[i] else "black"
+    for lead in topology.leaders:
+        ax.text(
+            x[lead] - length / 2,
+            lane_y[lead] - 1.1,
+            f"leader\n{speed[lead]:.1f} m/s",
+            ha="center",
+            va="top",
+            fontsize=7,
+        )
+    for f, (p, v) in enumerate(zip(predecessor, followers, strict=True)):
+        mid = (x[p] - length + x[v]) / 2
+        y = lane_y[v]
+        colour = COLLIDED_COLOUR if collided[f] else "black"
         ax.annotate(
             "",
-            xy=(x[i] - length, lane_y + car_h + 0.6),
-            xytext=(x[i + 1], lane_y + car_h + 0.6),
+            xy=(x[p] - length, y + car_h + 0.6),
+            xytext=(x[v], y + car_h + 0.6),
             arrowprops={"arrowstyle": "<->", "lw": 0.7, "color": colour},
         )
         ax.text(
             mid,
-            lane_y + car_h + 0.9,
-            f"e={gap_error[i]:+.2f} m",
+            y + car_h + 0.9,
+            f"e={gap_error[f]:+.2f} m",
             ha="center",
             va="bottom",
             fontsize=7,
             color=colour,
         )
-        ax.text(
-            mid, lane_y - 1.1, f"v{i + 1}={speed[i + 1]:.1f} m/s", ha="center", va="top", fontsize=7
-        )
+        ax.text(mid, y - 1.1, f"v{v}={speed[v]:.1f} m/s", ha="center", va="top", fontsize=7)
     ax.set_xlim(left, right)
-    ax.set_ylim(lane_y - 4.0, lane_y + car_h + 3.4)
+    ax.set_ylim(-4.0, max(lane_y) + car_h + 3.4)
     ax.set_yticks([])
     ax.set_xlabel("position relative to the leader (m)", fontsize=8)
     ax.tick_params(labelsize=7)
@@ -144,7 +159,8 @@ def _draw_links(ax, twin, record) -> None:
     n_links = twin.num_links
     ax.set_xlim(-0.6, n_links - 0.4)
     ax.set_xticks(range(n_links))
-    ax.set_xticklabels([f"link {i + 1}\n{i}\u2192{i + 1}" for i in range(n_links)], fontsize=7)
+    pairs = zip(twin.topology.link_tx, twin.topology.link_rx, strict=True)
+    ax.set_xticklabels([f"link {rx}\n{tx}\u2192{rx}" for tx, rx in pairs], fontsize=7)
     ax.tick_params(labelsize=7)
     if not getattr(twin, "radio_enabled", False) or getattr(twin, "link_state", None) is None:
         ax.set_ylim(0, 1)

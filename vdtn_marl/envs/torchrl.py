@@ -51,9 +51,9 @@ from vdtn_marl.envs.base import (
 from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.rra_reward import RRAReward, paid_ivoi_estimator
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator
@@ -98,8 +98,12 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             rollouts from reset also see the platoon mid-episode, where a CAM's content matters
             (at reset the platoon is in equilibrium). A scenario that collides during the
             burn-in starts anew. Must leave at least one interval of the episode.
-        **model_kwargs: model parameters for :meth:`TwinParams.from_overrides`
-            (e.g. ``num_vehicles=6``, ``episode_intervals=100``).
+        scenario: the world, a name of :data:`vdtn_marl.scenarios.SCENARIOS` (default
+            ``"platoon"``: one platoon with predecessor following; ``"two_platoons"``: two
+            platoons sharing the cell) or a :class:`~vdtn_marl.scenarios.Scenario`.
+        **model_kwargs: model parameters for
+            :meth:`~vdtn_marl.sim.params.TwinParams.from_overrides` (e.g. ``num_vehicles=6``,
+            ``episode_intervals=100``).
     """
 
     batch_locked = True
@@ -124,6 +128,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         completion="none",
         completion_predictor=None,
         burn_in_intervals: int = 0,
+        scenario: str | Scenario = DEFAULT_SCENARIO,
         **model_kwargs,
     ):
         if mode not in MODES:
@@ -136,7 +141,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         self.has_rra = mode in ("rra", "joint")
         self.impaired = mode != "control"  # CAMs cross the radio in every mode but "control"
         check_one_trace_choice(trace_source, model_kwargs)
-        params = TwinParams.from_overrides(**model_kwargs)
+        self.scenario = get_scenario(scenario)
+        params = self.scenario.twin_params(**model_kwargs)
         self.twin = DigitalTwin(
             params,
             batch_size=b,

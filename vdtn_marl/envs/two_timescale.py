@@ -5,8 +5,8 @@ One ``step()`` is one 1 ms subframe; ``t = step mod T`` (T = 50). Every agent ha
 =============  =======  =====================================================================
 agent          period   acts at
 =============  =======  =====================================================================
-``rra_i``      1        every step: sub-channel × power of V2V link i (vehicle i−1 → i),
-                        Discrete(M·P). docs/model.md §4.4
+``rra_i``      1        every step: sub-channel × power of the V2V link to vehicle i (from
+                        its predecessor, i−1 in one platoon), Discrete(M·P). docs/model.md §4.4
 ``vehicle_i``  T        the step with t = T−1, which closes interval k: its command u_k,
                         Box(1) m/s². Its observation is emitted at the step before (after
                         the CAM's delivery deadline, docs/model.md §4.5) and only changes then.
@@ -50,10 +50,8 @@ from vdtn_marl.core.interval import IntervalEngine, check_estimator_has_control
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
     rra_action_space,
-    rra_name,
     rra_observation_space,
     vehicle_action_space,
-    vehicle_name,
     vehicle_observation_space,
 )
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
@@ -106,8 +104,8 @@ class TwoTimescaleEnv(VDTNParallelEnv):
             ivoi_estimator=estimator,
             reward_fn=reward_fn,
         )
-        self.vehicle_agents = [vehicle_name(i + 1) for i in range(twin.num_followers)]
-        self.rra_agents = [rra_name(i + 1) for i in range(twin.num_links)]
+        self.vehicle_agents = self.scenario.vehicle_agents(twin.topology)
+        self.rra_agents = self.scenario.rra_agents(twin.topology)
         self.possible_agents = (
             self.vehicle_agents if vehicles_are_agents else []
         ) + self.rra_agents

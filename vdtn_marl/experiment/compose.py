@@ -240,7 +240,7 @@ def _model_parameters() -> list[str]:
     from vdtn_marl.sim.params import PlatoonParams, RadioParams
 
     names = {f.name for cls in (PlatoonParams, RadioParams) for f in dataclasses.fields(cls)}
-    return sorted(names - set(_SCENARIO_KEYS))
+    return sorted(names - set(_SCENARIO_KEYS) - {"scenario_topology"})  # a scenario's own
 
 
 _SCENARIO_KEYS = (

@@ -21,6 +21,7 @@ from vdtn_marl.algos.rra_baselines import RRA_BASELINES
 from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
 from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
 from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
@@ -45,7 +46,10 @@ class ScenarioConfig:
     """The simulated world. ``model`` holds any further :class:`TwinParams` override."""
 
     name: str = "platoon4"
-    num_vehicles: int = 4  # leader + followers
+    # the scenario class that arranges the vehicles: topology, lanes, agents
+    # (vdtn_marl/scenarios/: platoon, two_platoons)
+    kind: str = DEFAULT_SCENARIO
+    num_vehicles: int = 4  # leader + followers (all platoons together)
     num_subchannels: int = 4  # M
     subchannel_bandwidth_hz: float = 180e3
     cam_size_bits: int = 14_400
@@ -64,7 +68,9 @@ class ScenarioConfig:
     model: dict[str, Any] = field(default_factory=dict)
 
     def model_kwargs(self) -> dict[str, Any]:
-        """Flat keyword overrides for :meth:`TwinParams.from_overrides`."""
+        """The scenario and its flat model overrides, as the environments and
+        :func:`~vdtn_marl.scenarios.scenario_params` take them (``scenario=kind``, then
+        :meth:`TwinParams.from_overrides` keywords)."""
         kw = {
             "num_vehicles": self.num_vehicles,
             "num_subchannels": self.num_subchannels,
@@ -78,7 +84,7 @@ class ScenarioConfig:
                 f"scenario.model sets {clash[0]!r}, which is a scenario key itself; "
                 f"set scenario.{clash[0]} instead"
             )
-        return {**kw, **dict(self.model)}
+        return {"scenario": self.kind, **kw, **dict(self.model)}
 
 
 @dataclass
@@ -162,7 +168,8 @@ class RunConfig:
     progress: bool = True
 
     def twin_params(self) -> TwinParams:
-        return TwinParams.from_overrides(**self.scenario.model_kwargs())
+        """The model of the run, with its scenario's topology."""
+        return scenario_params(**self.scenario.model_kwargs())
 
 
 def _choice(key: str, value: Any, allowed: tuple[str, ...]) -> None:
@@ -279,6 +286,7 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive_int(f"experiment.{key}", getattr(e, key), low=0)
     _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
     _positive_int("threads", cfg.threads, low=0, high=1024)
+    _choice("scenario.kind", s.kind, tuple(SCENARIOS))
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)
     from vdtn_marl.data.selection import (
@@ -305,6 +313,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     check_eval_windows(
         s.traces, s.trace_path, s.eval_windows, episodes=e.eval_episodes,
         episode_intervals=p.episode_intervals, control_interval_s=p.platoon.control_interval_s,
+        leaders=p.platoon.topology.num_leaders,
     )  # fmt: skip
     if e.eval_intervals > s.episode_intervals:
         raise ConfigError(

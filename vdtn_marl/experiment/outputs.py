@@ -50,6 +50,7 @@ def write_run_plots(
                 acting.traces["speed_error_abs_mps"],
                 pp.control_interval_s,
                 run_dir / plots.ERROR_TRACES_FILE,
+                vehicle_ids=pp.topology.followers,
             )
         )
         written.append(

@@ -231,9 +231,11 @@ def plot_error_traces(
     interval_s: float,
     path: str | Path,
     title: str = "platoon errors, evaluation scenario 0",
+    vehicle_ids: Sequence[int] | None = None,
 ) -> Path:
     """|gap error| (m) and |speed error| (m/s) of every follower over one evaluation scenario;
-    inputs [K, F] (intervals × followers)."""
+    inputs [K, F] (intervals × followers). ``vehicle_ids`` [F] label the lines (the topology's
+    followers; default 1..F, one platoon)."""
     plt = pyplot_agg()
     import numpy as np
 
@@ -241,8 +243,9 @@ def plot_error_traces(
     speed = np.asarray(speed_error_mps)
     time_s = np.arange(gap.shape[0]) * interval_s
     fig, (top, bottom) = plt.subplots(2, 1, figsize=(6.4, 5.0), dpi=120, sharex=True)
-    for follower in range(gap.shape[1]):
-        top.plot(time_s, gap[:, follower], linewidth=1, label=f"vehicle {follower + 1}")
+    ids = list(vehicle_ids) if vehicle_ids is not None else range(1, gap.shape[1] + 1)
+    for follower, vehicle in enumerate(ids):
+        top.plot(time_s, gap[:, follower], linewidth=1, label=f"vehicle {vehicle}")
         bottom.plot(time_s, speed[:, follower], linewidth=1)
     top.legend(fontsize=8, ncol=min(gap.shape[1], 4))
     _label_error_axes(top, bottom, title)

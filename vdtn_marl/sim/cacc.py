@@ -56,10 +56,11 @@ class CACCController:
         if gap_error is None or speed_error is None:
             gap_error, speed_error = spacing_errors(state, params)
         lo, hi = params.accel_min_mps2, params.accel_max_mps2
+        topology = params.topology
         u = (
             self.gap_gain * clamp(gap_error, -GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M)
             + self.speed_gain * clamp(speed_error, -SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS)
-            + self.feedforward_gain * clamp(state.command_mps2[:, :-1], lo, hi)
-            - self.accel_gain * clamp(state.accel_mps2[:, 1:], lo, hi)
+            + self.feedforward_gain * clamp(topology.predecessors_of(state.command_mps2), lo, hi)
+            - self.accel_gain * clamp(topology.followers_of(state.accel_mps2), lo, hi)
         )
         return clamp(u, self.params.accel_min_mps2, self.params.accel_max_mps2)

@@ -1,8 +1,9 @@
 """Large-scale and fast fading channel model (docs/model.md §4.2–4.3).
 
-Geometry: a straight highway along x; every vehicle drives in one lane at y = 0, height
-``vehicle_height_m``; base stations stand every ``inter_site_distance_m`` at y =
-``bs_road_offset_m``, height ``bs_height_m``. All functions are batched over leading dimensions
+Geometry: a straight highway along x; vehicles drive at height ``vehicle_height_m`` in lanes
+across the road (y = 0, or the scenario topology's lateral offsets, docs/model.md §6); base
+stations stand every ``inter_site_distance_m`` at y = ``bs_road_offset_m``, height
+``bs_height_m``. All functions are batched over leading dimensions
 and return float tensors in dB (path loss, shadowing) or linear power gain (fast fading). The
 deterministic ones also run on NumPy arrays (:mod:`vdtn_marl.sim.backend`); random draws are
 always made with the twin's torch generator.
@@ -66,17 +67,36 @@ def serving_bs_x_m(
 
 
 def v2i_distance_m(
-    vehicle_x_m: torch.Tensor, bs_x_m: torch.Tensor, radio: RadioParams
+    vehicle_x_m: torch.Tensor,
+    bs_x_m: torch.Tensor,
+    radio: RadioParams,
+    lateral_offset_m: torch.Tensor | None = None,
 ) -> torch.Tensor:
-    """3-D vehicle-to-BS distance in m; ``vehicle_x_m`` [B, N], ``bs_x_m`` [B] → [B, N]."""
+    """3-D vehicle-to-BS distance in m; ``vehicle_x_m`` [B, N], ``bs_x_m`` [B] → [B, N].
+
+    ``lateral_offset_m`` [N]: each vehicle's lane centre across the road, towards the base
+    stations (None: every vehicle at 0, ``bs_road_offset_m`` from the BS row).
+    """
     dx = vehicle_x_m - bs_x_m[:, None]
     dz = radio.bs_height_m - radio.vehicle_height_m
-    return sqrt(dx * dx + radio.bs_road_offset_m**2 + dz * dz)
+    if lateral_offset_m is None:
+        return sqrt(dx * dx + radio.bs_road_offset_m**2 + dz * dz)
+    dy = radio.bs_road_offset_m - lateral_offset_m
+    return sqrt(dx * dx + dy * dy + dz * dz)
 
 
-def v2v_distance_m(vehicle_x_m: torch.Tensor) -> torch.Tensor:
-    """Pairwise vehicle distance in m (same lane, same height), [B, N] → [B, N, N]."""
-    return abs(vehicle_x_m[:, :, None] - vehicle_x_m[:, None, :])
+def v2v_distance_m(
+    vehicle_x_m: torch.Tensor, lateral_offset_m: torch.Tensor | None = None
+) -> torch.Tensor:
+    """Pairwise vehicle distance in m (same height), [B, N] → [B, N, N].
+
+    ``lateral_offset_m`` [N]: lane centres across the road (None: one lane, |Δx|).
+    """
+    dx = vehicle_x_m[:, :, None] - vehicle_x_m[:, None, :]
+    if lateral_offset_m is None:
+        return abs(dx)
+    dy = lateral_offset_m[:, None] - lateral_offset_m[None, :]
+    return sqrt(dx * dx + dy * dy)
 
 
 def symmetric_normal(

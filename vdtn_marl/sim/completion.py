@@ -270,8 +270,8 @@ class KalmanCompletion(RecursiveCompletion):
     q·[[T³/3, T²/2], [T²/2, T]] (T = nΔt). Measurements, applied in this order:
 
     1. local sensing z (the predecessor's mean acceleration over the last interval), H = [1,
-       −ℓΔt] with ℓ = 0 for the first follower (the leader's acceleration is constant within an
-       interval and its sample at kΔt is that of interval k−1) and ½ for the others;
+       −ℓΔt] with ℓ = 0 for a follower of a leader (a leader's acceleration is constant within
+       an interval and its sample at kΔt is that of interval k−1) and ½ for the others;
        variance ``sensing_std_mps2``².
     2. a CAM not used before (its stamp k − age/Δt is newer than the last one used): its
        acceleration, H = [1, −age]; and for a predecessor that is a follower its command
@@ -367,8 +367,9 @@ class KalmanCompletion(RecursiveCompletion):
         P = trans @ P @ trans.transpose(-1, -2) + noise
 
         # 1. local sensing over the last interval
-        is_first = torch.zeros(f, dtype=torch.bool, device=dev)
-        is_first[0] = True
+        # followers whose predecessor leads: their sensing sees the leader's constant
+        # acceleration, and the leader's CAM carries no command of its own
+        is_first = torch.tensor(self.params.topology.follows_leader, device=dev)
         lag = torch.where(is_first, 0.0, 0.5).double() * self.dt
         z = self._relative_measurement(state["previous"], observation)
         use = state["has_previous"] & (steps[:, None] == 1)
@@ -498,8 +499,8 @@ class LearnedCompletion(RecursiveCompletion):
         z = torch.where(use, z, torch.zeros_like(z))
         sensed = torch.cat([z[..., None], state["sensed"][..., :-1]], -1)
         valid = torch.cat([use[..., None].double(), state["valid"][..., :-1]], -1)
-        leader = torch.zeros_like(z)
-        leader[:, 0] = 1.0
+        follows_leader = self.params.topology.follows_leader
+        leader = torch.tensor(follows_leader, dtype=z.dtype, device=z.device).expand_as(z)
         features = torch.cat(
             [
                 sensed,

@@ -1,10 +1,11 @@
 """The one definition of the RRA observation layout (docs/model.md §4.6).
 
-Every RRA agent (one per V2V link i, predecessor i−1 → follower i) observes, per subframe, the
-features of :data:`RRA_OBS_FEATURES` in this order. The twin fills them
-(:meth:`~vdtn_marl.sim.twin.DigitalTwin.rra_observation`), the environments take their
-observation spaces from :meth:`RRAFeatureLayout.bounds`, and the RRA baselines read their
-inputs through :class:`RRAFeatureLayout`; none of them writes an index by hand.
+Every RRA agent (one per V2V link: the follower's predecessor → the follower, i−1 → i in one
+platoon; docs/model.md §6) observes, per subframe, the features of :data:`RRA_OBS_FEATURES` in
+this order. The twin fills them (:meth:`~vdtn_marl.sim.twin.DigitalTwin.rra_observation`), the
+environments take their observation spaces from :meth:`RRAFeatureLayout.bounds`, and the RRA
+baselines read their inputs through :class:`RRAFeatureLayout`; none of them writes an index by
+hand.
 
 ===========================  =====  ==========================================================
 feature                      width  content

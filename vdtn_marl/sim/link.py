@@ -27,6 +27,7 @@ from vdtn_marl.sim.channel import (
 )
 from vdtn_marl.sim.layout import RRA_OBS_GAIN_CLIP, RRA_OBS_GAIN_SCALE_DB
 from vdtn_marl.sim.params import RadioParams
+from vdtn_marl.sim.topology import Topology
 
 
 def _xp(x: Array):
@@ -131,21 +132,23 @@ def large_scale_gains_db(
 
 
 @lru_cache(maxsize=32)
-def _link_layout(num_vehicles: int, num_subchannels: int, device: torch.device | None):
-    """Index constants of the PF link layout: tx, rx, V2I user per sub-channel, off-diagonal.
+def _link_layout(topology: Topology, num_subchannels: int, device: torch.device | None):
+    """Index constants of the topology's links: tx [L], rx [L], the V2I user of each
+    sub-channel [M], and the off-diagonal mask [L, L] (docs/model.md §6).
 
     ``device=None``: NumPy arrays.
     """
-    links = num_vehicles - 1
+    links = topology.num_links
+    tx, rx = topology.link_tx, topology.link_rx
+    v2i_user = topology.v2i_user(num_subchannels)
     if device is None:
-        tx = np.arange(links)
-        v2i_user = np.arange(num_subchannels) % num_vehicles
         off_diagonal = (1.0 - np.eye(links)).astype(np.float32)
-        return tx, tx + 1, v2i_user, off_diagonal
-    tx = torch.arange(links, device=device)
-    v2i_user = torch.arange(num_subchannels, device=device) % num_vehicles
+        return np.array(tx), np.array(rx), np.array(v2i_user), off_diagonal
     off_diagonal = 1.0 - torch.eye(links, device=device)
-    return tx, tx + 1, v2i_user, off_diagonal
+    tx, rx, v2i_user = (
+        torch.tensor(rows, dtype=torch.long, device=device) for rows in (tx, rx, v2i_user)
+    )
+    return tx, rx, v2i_user, off_diagonal
 
 
 def build_interval_tables(
@@ -154,19 +157,23 @@ def build_interval_tables(
     radio: RadioParams,
     num_subframes: int,
     generator: torch.Generator,
+    topology: Topology,
 ) -> IntervalTables:
     """Draw the interval's Rayleigh fading and assemble the linear tables.
 
     ``v2v_gain_db`` [B, N, N] (tx row, rx column) and ``v2i_gain_db`` [B, N] come from
-    :func:`large_scale_gains_db`. V2V link l runs from vehicle l to vehicle l+1; V2I user m is
-    vehicle m mod N. Fading draws happen in a fixed order so that a seeded generator
-    reproduces the same tables. With NumPy gains (the single-scenario fast path) the fading is
-    drawn with the same torch generator and the tables are NumPy arrays.
+    :func:`large_scale_gains_db`. V2V link l runs from ``topology.link_tx[l]`` to
+    ``topology.link_rx[l]``; sub-channel m carries the uplink of ``topology.v2i_user(M)[m]``
+    (PF: link l from vehicle l to l+1, V2I user m = vehicle m mod N). Fading draws happen in a
+    fixed order so that a seeded generator reproduces the same tables. With NumPy gains (the
+    single-scenario fast path) the fading is drawn with the same torch generator and the
+    tables are NumPy arrays.
     """
     b, n = v2i_gain_db.shape
-    links, subch, t = n - 1, radio.num_subchannels, num_subframes
+    links, subch, t = topology.num_links, radio.num_subchannels, num_subframes
     numpy = isinstance(v2i_gain_db, np.ndarray)
-    tx, rx, v2i_user, off_diagonal = _link_layout(n, subch, None if numpy else v2i_gain_db.device)
+    layout = _link_layout(topology, subch, None if numpy else v2i_gain_db.device)
+    tx, rx, v2i_user, off_diagonal = layout
     v2i_power_mw = db_to_linear(radio.v2i_power_dbm)
 
     v2v_lin = db_to_linear(v2v_gain_db)  # [B, N, N]

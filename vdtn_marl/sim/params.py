@@ -14,6 +14,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.topology import Topology, platoon_topology
 
 KAPPA_SUM_ABS_TOL = 1e-6
 """How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
@@ -68,10 +69,20 @@ class PlatoonParams:
     collision_penalty: float = -100.0
     initial_gap_noise_m: float = 0.0  # std of the initial gap perturbation
     initial_speed_noise_mps: float = 0.0  # std of the initial speed perturbation
+    # who leads, who follows whom, lanes and V2I users, built by a scenario
+    # (vdtn_marl.scenarios); None: one platoon with predecessor following (docs/model.md §6)
+    scenario_topology: Topology | None = None
+
+    @property
+    def topology(self) -> Topology:
+        """The scenario's topology, or one PF platoon of ``num_vehicles``."""
+        if self.scenario_topology is None:
+            return platoon_topology(self.num_vehicles)
+        return self.scenario_topology
 
     @property
     def num_followers(self) -> int:
-        return self.num_vehicles - 1
+        return self.topology.num_followers
 
     @property
     def subframe_s(self) -> float:
@@ -86,6 +97,13 @@ class PlatoonParams:
         _check_types(self)
         if not 2 <= self.num_vehicles <= 64:
             raise ConfigError(f"num_vehicles={self.num_vehicles!r} is outside [2, 64]")
+        topology = self.scenario_topology
+        if topology is not None and topology.num_vehicles != self.num_vehicles:
+            raise ConfigError(
+                f"num_vehicles={self.num_vehicles!r} differs from the {topology.num_vehicles} "
+                f"vehicles of the scenario topology {topology.name!r}; allowed: "
+                f"{topology.num_vehicles}"
+            )
         if not 1 <= self.subframes_per_interval <= 1000:
             raise ConfigError(
                 f"subframes_per_interval={self.subframes_per_interval!r} is outside [1, 1000]"
@@ -227,7 +245,7 @@ class TwinParams:
 
         Unknown keys raise a :class:`ConfigError` listing the known ones.
         """
-        platoon_keys = {f.name for f in fields(PlatoonParams)}
+        platoon_keys = {f.name for f in fields(PlatoonParams)} - {"scenario_topology"}
         radio_keys = {f.name for f in fields(RadioParams)}
         top_keys = {"episode_intervals", "traces"}
         platoon_kw, radio_kw, top_kw = {}, {}, {}

@@ -1,7 +1,9 @@
 """Longitudinal platoon dynamics, spacing policy, errors and control reward (docs/model.md §2).
 
-Vehicle 0 is the leader (follows a speed trace); vehicles 1..N−1 are followers with a
-first-order driveline lag. Every function is batched over B scenarios and pure: it takes a
+Leaders follow speed traces; followers have a first-order driveline lag and keep a gap to
+their predecessor. Who leads and who follows whom is the scenario's topology
+(``params.topology``, :class:`~vdtn_marl.sim.topology.Topology`; by default vehicle 0 leads and
+vehicle i follows i−1). Every function is batched over B scenarios and pure: it takes a
 :class:`PlatoonState` and returns a new one, so the twin and counterfactual VoI rollouts share
 the same physics.
 
@@ -23,7 +25,7 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from vdtn_marl.sim.backend import cast_like, cat, clamp, repeat_rows, stack, to_numpy, to_torch, xp
+from vdtn_marl.sim.backend import cast_like, clamp, repeat_rows, stack, to_numpy, to_torch, xp
 from vdtn_marl.sim.params import PlatoonParams
 
 #: Vehicle observation features, in order (docs/model.md §2.4).
@@ -44,13 +46,13 @@ CAM_AGE_BOUND_MS = 10_000.0
 
 @dataclass
 class PlatoonState:
-    """Kinematic state of B platoons at a control-interval boundary.
+    """Kinematic state of B scenarios' N vehicles at a control-interval boundary.
 
     ``command_mps2`` holds the command in force at the interval start (u_{k−1}) for every
-    vehicle; for the leader it is its acceleration over the previous interval.
+    vehicle; for a leader it is its acceleration over the previous interval.
     """
 
-    position_m: torch.Tensor  # [B, N], along the road; leader has the largest position
+    position_m: torch.Tensor  # [B, N], along the road; each vehicle ahead of its followers
     speed_mps: torch.Tensor  # [B, N]
     accel_mps2: torch.Tensor  # [B, N]
     command_mps2: torch.Tensor  # [B, N]
@@ -83,19 +85,26 @@ class PlatoonState:
 
 
 def gaps_m(position_m: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
-    """Bumper-to-bumper gap g_i = p_{i−1} − p_i − L of each follower, [B, N] → [B, N−1]."""
-    return position_m[:, :-1] - position_m[:, 1:] - params.vehicle_length_m
+    """Bumper-to-bumper gap g_i = p_pred(i) − p_i − L of each follower i to its predecessor,
+    [B, N] → [B, F]."""
+    topology = params.topology
+    return (
+        topology.predecessors_of(position_m)
+        - topology.followers_of(position_m)
+        - params.vehicle_length_m
+    )
 
 
 def desired_gaps_m(speed_mps: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
-    """Constant-time-headway desired gap d_i = r + h·v_i of each follower, [B, N−1]."""
-    return params.standstill_gap_m + params.time_headway_s * speed_mps[:, 1:]
+    """Constant-time-headway desired gap d_i = r + h·v_i of each follower, [B, N] → [B, F]."""
+    return params.standstill_gap_m + params.time_headway_s * params.topology.followers_of(speed_mps)
 
 
 def spacing_errors(state: PlatoonState, params: PlatoonParams) -> tuple[torch.Tensor, torch.Tensor]:
-    """Gap error e_p = g − d (m) and speed error e_v = v_{i−1} − v_i (m/s), each [B, N−1]."""
+    """Gap error e_p = g − d (m) and speed error e_v = v_pred(i) − v_i (m/s), each [B, F]."""
+    topology = params.topology
     gap_error = gaps_m(state.position_m, params) - desired_gaps_m(state.speed_mps, params)
-    speed_error = state.speed_mps[:, :-1] - state.speed_mps[:, 1:]
+    speed_error = topology.predecessors_of(state.speed_mps) - topology.followers_of(state.speed_mps)
     return gap_error, speed_error
 
 
@@ -104,23 +113,36 @@ def initial_state(
     params: PlatoonParams,
     generator: torch.Generator,
 ) -> PlatoonState:
-    """Every follower at the desired gap and the leader's speed, a = 0 (plus optional noise).
+    """Every follower at the desired gap behind its predecessor and at its leader's speed,
+    a = 0 (plus optional noise).
 
-    ``leader_speed_mps`` [B]; the leader starts at position 0 m.
+    ``leader_speed_mps`` [B, Λ], one speed per leader of ``params.topology``; leader j starts
+    at ``topology.leader_position_m[j]`` (default 0 m).
     """
-    b, n = leader_speed_mps.shape[0], params.num_vehicles
+    topology = params.topology
+    b, n, f = leader_speed_mps.shape[0], params.num_vehicles, topology.num_followers
     dev = leader_speed_mps.device
-    speed = leader_speed_mps[:, None].expand(b, n).clone()
+    speed = leader_speed_mps[:, list(topology.leader_of)]  # [B, N]: each vehicle's leader's
     if params.initial_speed_noise_mps > 0:
-        noise = torch.randn(b, n - 1, generator=generator, device=dev)
-        speed[:, 1:] = (speed[:, 1:] + params.initial_speed_noise_mps * noise).clamp_min(0.0)
-    spacing = params.vehicle_length_m + desired_gaps_m(speed, params)  # [B, N−1]
+        noise = torch.randn(b, f, generator=generator, device=dev)
+        rows = list(topology.followers)
+        speed[:, rows] = (speed[:, rows] + params.initial_speed_noise_mps * noise).clamp_min(0.0)
+    spacing = params.vehicle_length_m + desired_gaps_m(speed, params)  # [B, F]
     if params.initial_gap_noise_m > 0:
-        noise = torch.randn(b, n - 1, generator=generator, device=dev)
+        noise = torch.randn(b, f, generator=generator, device=dev)
         spacing = spacing + (params.initial_gap_noise_m * noise).clamp(
             -0.5 * params.standstill_gap_m, None
         )
-    position = torch.cat([torch.zeros(b, 1, device=dev), -torch.cumsum(spacing, dim=1)], dim=1)
+    # distance behind the leader: the spacings along each chain, summed in float64 and rounded
+    # once, as torch's CPU cumsum of float32 does (such sums are exact in float64, so the
+    # order of the terms does not change a bit)
+    chain = torch.as_tensor(topology.chain_matrix(), device=dev)
+    behind = (spacing.double() @ chain.T).float()  # [B, F]
+    start = torch.tensor(topology.leader_position_m or (0.0,) * topology.num_leaders, device=dev)
+    leader_x = start.expand(b, -1)  # [B, Λ]
+    position = topology.assemble(
+        leader_x, topology.followers_of(leader_x[:, list(topology.leader_of)]) - behind
+    )
     zeros = torch.zeros(b, n, device=dev)
     return PlatoonState(position, speed, zeros.clone(), zeros)
 
@@ -130,7 +152,7 @@ class IntervalIntegrator:
 
     Per subframe (dt = Δt/T), for a follower z = [p, v, a]:
     p' = p + dt·v,  v' = v + dt·a,  a' = a + (dt/τ)·(u − a).
-    The leader's acceleration is set by the trace and constant within the interval.
+    A leader's acceleration is set by its trace and constant within the interval.
     """
 
     def __init__(self, params: PlatoonParams, device: torch.device, dtype=torch.float32):
@@ -163,16 +185,21 @@ class IntervalIntegrator:
     ) -> PlatoonState:
         """State at the end of the interval.
 
-        ``leader_accel_mps2`` [B]; ``command_mps2`` [B, N−1] = u_k, clipped to the actuator
-        bounds; ``switch_subframe`` [B, N−1] int in 0..T: u_{k−1} is in force for subframes
-        < d and u_k from d on (d = T: u_k takes force at the next interval). Torch tensors, or
-        NumPy arrays for a NumPy state.
+        ``leader_accel_mps2`` [B, Λ] (one per leader of ``params.topology``);
+        ``command_mps2`` [B, F] = u_k, clipped to the actuator bounds; ``switch_subframe``
+        [B, F] int in 0..T: u_{k−1} is in force for subframes < d and u_k from d on (d = T:
+        u_k takes force at the next interval). Torch tensors, or NumPy arrays for a NumPy
+        state.
         """
         p = self.params
         t = p.subframes_per_interval
+        topology = p.topology
+        follower = topology.followers_of
         u_new = clamp(command_mps2, p.accel_min_mps2, p.accel_max_mps2)
-        u_old = state.command_mps2[:, 1:]
-        z = stack([state.position_m[:, 1:], state.speed_mps[:, 1:], state.accel_mps2[:, 1:]])
+        u_old = follower(state.command_mps2)
+        z = stack(
+            [follower(state.position_m), follower(state.speed_mps), follower(state.accel_mps2)]
+        )
         if isinstance(z, np.ndarray):
             phi, gain = self._phi_t_np, self._input_gain_np
             # z @ Φᵀ as torch's small matmul computes it (products summed in order k = 0, 1, 2,
@@ -186,17 +213,19 @@ class IntervalIntegrator:
         z = z_phi + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
 
         interval_s = p.control_interval_s
-        lead_v = state.speed_mps[:, 0]
+        lead_v = topology.leaders_of(state.speed_mps)  # [B, Λ]
         lead_p = (
-            state.position_m[:, 0] + interval_s * lead_v + self.leader_pos_gain * leader_accel_mps2
+            topology.leaders_of(state.position_m)
+            + interval_s * lead_v
+            + self.leader_pos_gain * leader_accel_mps2
         )
         lead_v = clamp(lead_v + interval_s * leader_accel_mps2, 0.0)
 
-        position = cat([lead_p[:, None], z[..., 0]], axis=1)
-        speed = cat([lead_v[:, None], clamp(z[..., 1], 0.0)], axis=1)
-        accel = cat([leader_accel_mps2[:, None], z[..., 2]], axis=1)
+        position = topology.assemble(lead_p, z[..., 0])
+        speed = topology.assemble(lead_v, clamp(z[..., 1], 0.0))
+        accel = topology.assemble(leader_accel_mps2, z[..., 2])
         # u_k is in force at the start of the next interval, whatever its switch time was
-        command = cat([leader_accel_mps2[:, None], u_new], axis=1)
+        command = topology.assemble(leader_accel_mps2, u_new)
         return PlatoonState(position, speed, accel, command)
 
 
@@ -207,7 +236,7 @@ def control_reward(
     prev_command_mps2: torch.Tensor,
     params: PlatoonParams,
 ) -> torch.Tensor:
-    """r = −(|e_p|/ê_p + α|e_v|/ê_v + β|u|/u_max + γ_j|jerk|/j_max), [B, N−1] (docs §2.3).
+    """r = −(|e_p|/ê_p + α|e_v|/ê_v + β|u|/u_max + γ_j|jerk|/j_max), [B, F] (docs §2.3).
 
     Errors are those at the end of the interval; jerk = (u_k − u_{k−1})/Δt.
     """
@@ -227,39 +256,42 @@ def vehicle_observation(
     cam_age_ms: torch.Tensor,
     params: PlatoonParams,
 ) -> torch.Tensor:
-    """Follower observations [B, N−1, 8] in the order of :data:`VEHICLE_OBS_FEATURES`.
+    """Follower observations [B, F, 8] in the order of :data:`VEHICLE_OBS_FEATURES`.
 
     Own gap/speed error and acceleration come from local sensing at the interval start;
-    ``cam_content`` [B, N−1, 2] is the predecessor's (acceleration, command) from the CAM used
+    ``cam_content`` [B, F, 2] is the predecessor's (acceleration, command) from the CAM used
     for the decision; ``cam_delay_ms`` is when the decision's command takes force (0 = at the
     interval start, T = not in this interval) and ``cam_age_ms`` the age of the CAM content at
     the interval start. Values are clipped to the observation space bounds.
     """
     gap_error, speed_error = spacing_errors(state, params)
+    follower = params.topology.followers_of
     lo, hi = params.accel_min_mps2, params.accel_max_mps2
     return stack(
         [
             clamp(gap_error, -GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M),
             clamp(speed_error, -SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS),
-            clamp(state.accel_mps2[:, 1:], lo, hi),
+            clamp(follower(state.accel_mps2), lo, hi),
             clamp(cam_content[..., 0], lo, hi),
             clamp(cam_content[..., 1], lo, hi),
             cast_like(cam_delay_ms, gap_error),
             clamp(cast_like(cam_age_ms, gap_error), 0.0, CAM_AGE_BOUND_MS),
-            clamp(state.command_mps2[:, 1:], lo, hi),
+            clamp(follower(state.command_mps2), lo, hi),
         ]
     )
 
 
-def cam_snapshot(state: PlatoonState) -> torch.Tensor:
-    """CAM content each follower would receive from its predecessor now: [B, N−1, 2]."""
-    return stack([state.accel_mps2[:, :-1], state.command_mps2[:, :-1]])
+def cam_snapshot(state: PlatoonState, params: PlatoonParams) -> torch.Tensor:
+    """CAM content each follower would receive from its predecessor now (the predecessor's
+    acceleration and command): [B, F, 2]."""
+    predecessor = params.topology.predecessors_of
+    return stack([predecessor(state.accel_mps2), predecessor(state.command_mps2)])
 
 
 def perfect_observation(state: PlatoonState, params: PlatoonParams) -> torch.Tensor:
-    """Observation with an exact, instantaneous CAM (delay 0, age 0), [B, N−1, 8]."""
-    zeros = xp(state.speed_mps).zeros_like(state.speed_mps[:, 1:])
-    return vehicle_observation(state, cam_snapshot(state), zeros, zeros, params)
+    """Observation with an exact, instantaneous CAM (delay 0, age 0), [B, F, 8]."""
+    zeros = xp(state.speed_mps).zeros_like(params.topology.followers_of(state.speed_mps))
+    return vehicle_observation(state, cam_snapshot(state, params), zeros, zeros, params)
 
 
 def vehicle_observation_bounds(params: PlatoonParams) -> tuple[list[float], list[float]]:

@@ -11,6 +11,11 @@ Life cycle of one control interval k (docs/model.md §1, §4.5):
 4. :meth:`DigitalTwin.finish_interval` — the platoon is integrated over the interval with the
    command switching from u_{k−1} to u_k when CAM_k arrived, and the control reward is paid.
 
+Who leads, whom each follower follows and hears its CAM from, the V2I users and the lanes come
+from ``params.platoon.topology`` (:class:`~vdtn_marl.sim.topology.Topology`, built by a
+scenario; by default one platoon with predecessor following), as index arrays. Each leader
+drives its own window of the trace set: ``leader_speed_mps`` is [B, Λ, K].
+
 The twin knows nothing of RL APIs. Every random number comes from one seeded
 ``torch.Generator`` on the twin's device.
 
@@ -178,8 +183,11 @@ class DigitalTwin:
         self.generator = torch.Generator(device=self.device)
 
         pp, rp = self.params.platoon, self.params.radio
-        self.num_followers = pp.num_followers
-        self.num_links = pp.num_followers
+        #: who leads, who follows whom, links, V2I users, lanes (docs/model.md §6)
+        self.topology = topology = pp.topology
+        self.num_leaders = topology.num_leaders
+        self.num_followers = topology.num_followers
+        self.num_links = topology.num_links
         self.num_subchannels = rp.num_subchannels
         self.subframes_per_interval = pp.subframes_per_interval
         self.subframe_ms = pp.subframe_s * 1000.0
@@ -193,6 +201,11 @@ class DigitalTwin:
         self.ns = ns = ArrayNamespace(backend == "numpy", self.device)
         self._numpy = ns.numpy
         self._time_left = ns.native(self._time_left)
+        # lane centres across the road [N] (m), None for one lane (docs/model.md §6)
+        self._lateral_offset_m = None
+        if not topology.single_lane:
+            offsets = torch.tensor(topology.lateral_offset_m, device=self.device)
+            self._lateral_offset_m = ns.native(offsets)
         self._decode_torch = link.ActionTables.build(rp, self.device)
         self._const_torch = link.KernelConstants.build(
             rp, pp.subframe_s, self.batch_size, self.num_links, self.device
@@ -230,14 +243,18 @@ class DigitalTwin:
         count = b if mask is None else int(mask.sum())
         if count == 0:
             return
-        traces = self.trace_source.sample(count, num_points, pp.control_interval_s, self.generator)
-        traces = traces.to(device=dev, dtype=torch.float32)
+        # one trace window per leader, leaders of a scenario consecutive: [B, Λ, K]
+        leaders = self.num_leaders
+        traces = self.trace_source.sample(
+            count * leaders, num_points, pp.control_interval_s, self.generator
+        )
+        traces = traces.to(device=dev, dtype=torch.float32).reshape(count, leaders, num_points)
         if not torch.isfinite(traces).all() or (traces < 0).any():
             raise ValueError(
                 f"trace source {self.trace_source.info.name!r} returned "
                 "non-finite or negative speeds"
             )
-        state = initial_state(traces[:, 0], pp, self.generator)
+        state = initial_state(traces[..., 0], pp, self.generator)
         v2v_shadow = rp.v2v_shadow_std_db * channel.symmetric_normal(
             (count, pp.num_vehicles, pp.num_vehicles), self.generator
         )
@@ -247,7 +264,7 @@ class DigitalTwin:
         bs_offset = rp.inter_site_distance_m * torch.rand(
             count, generator=self.generator, device=dev
         )
-        cam_held = cam_snapshot(state)
+        cam_held = cam_snapshot(state, pp)
         if mask is None:
             self.leader_speed_mps = traces
             self.platoon = state
@@ -310,7 +327,7 @@ class DigitalTwin:
             self._begin_interval(mask)
 
     def _begin_interval(self, mask: torch.Tensor | None) -> None:
-        snapshot = self._public(cam_snapshot(self._native_platoon()))
+        snapshot = self._public(cam_snapshot(self._native_platoon(), self.params.platoon))
         self.cam_snapshot = (
             snapshot
             if mask is None
@@ -404,14 +421,17 @@ class DigitalTwin:
         self.v2v_shadow_db = self._public(v2v_shadow)
         self.v2i_shadow_db = self._public(v2i_shadow)
         bs_x = channel.serving_bs_x_m(mean_axis(x, 1), native(self.bs_offset_m), rp)
+        lateral = self._lateral_offset_m
         v2v_db, v2i_db = link.large_scale_gains_db(
-            channel.v2v_pathloss_db(channel.v2v_distance_m(x), rp),
+            channel.v2v_pathloss_db(channel.v2v_distance_m(x, lateral), rp),
             v2v_shadow,
-            channel.v2i_pathloss_db(channel.v2i_distance_m(x, bs_x, rp)),
+            channel.v2i_pathloss_db(channel.v2i_distance_m(x, bs_x, rp, lateral)),
             v2i_shadow,
             rp,
         )
-        return link.build_interval_tables(v2v_db, v2i_db, rp, self.subframes_per_interval, g)
+        return link.build_interval_tables(
+            v2v_db, v2i_db, rp, self.subframes_per_interval, g, self.topology
+        )
 
     def _rra_observation_buffer(self, tables: link.IntervalTables):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
@@ -430,8 +450,8 @@ class DigitalTwin:
                 [
                     gap_error / pp.gap_error_scale_m,
                     speed_error / pp.speed_error_scale_mps,
-                    platoon.accel_mps2[:, :-1] / pp.accel_max_mps2,
-                    platoon.command_mps2[:, 1:] / pp.accel_max_mps2,
+                    self.topology.predecessors_of(platoon.accel_mps2) / pp.accel_max_mps2,
+                    self.topology.followers_of(platoon.command_mps2) / pp.accel_max_mps2,
                 ]
             ),
             -RRA_CONTROL_CLIP,
@@ -594,22 +614,26 @@ class DigitalTwin:
         )
 
     def leader_accel_mps2(self, intervals: torch.Tensor) -> torch.Tensor:
-        """Leader acceleration (m/s²) in intervals ``intervals`` [B, ...] → same shape.
+        """Every leader's acceleration (m/s²) in intervals ``intervals`` [B, ...] →
+        [B, ..., Λ] (Λ = ``num_leaders``; the leaders of ``topology.leaders`` in order).
 
         ``intervals`` may be a NumPy array (on a CPU twin): the result is one too.
         """
-        last = self.leader_speed_mps.shape[1] - 2
+        b, leaders = self.batch_size, self.num_leaders
+        last = self.leader_speed_mps.shape[-1] - 2
         k = clamp(intervals, 0, last)
-        flat = k.reshape(self.batch_size, -1)
+        flat = k.reshape(b, 1, -1)
+        dt = self.params.platoon.control_interval_s
         if isinstance(flat, np.ndarray):
             v = to_numpy(self.leader_speed_mps)
-            rows = np.arange(self.batch_size)[:, None]
-            accel = (v[rows, flat + 1] - v[rows, flat]) / self.params.platoon.control_interval_s
+            rows = np.arange(b)[:, None, None]
+            lead = np.arange(leaders)[None, :, None]
+            accel = (v[rows, lead, flat + 1] - v[rows, lead, flat]) / dt
         else:
             v = self.leader_speed_mps
-            ahead = v.gather(1, flat + 1)
-            accel = (ahead - v.gather(1, flat)) / self.params.platoon.control_interval_s
-        return accel.reshape(intervals.shape)
+            flat = flat.expand(b, leaders, flat.shape[-1])
+            accel = (v.gather(2, flat + 1) - v.gather(2, flat)) / dt
+        return accel.swapaxes(1, 2).reshape(*intervals.shape, leaders)
 
     def finish_interval(
         self,
@@ -652,7 +676,8 @@ class DigitalTwin:
         interval = native(self.interval)
         after = self.integrator.integrate(before, self.leader_accel_mps2(interval), u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
-        reward = control_reward(gap_error, speed_error, u, before.command_mps2[:, 1:], pp)
+        follower = self.topology.followers_of
+        reward = control_reward(gap_error, speed_error, u, follower(before.command_mps2), pp)
         collided = gaps_m(after.position_m, pp) <= 0
         reward = reward + as_float(collided) * pp.collision_penalty
 
@@ -678,7 +703,7 @@ class DigitalTwin:
         self.command_history = public(
             cat(
                 [
-                    before.command_mps2[:, 1:, None],
+                    follower(before.command_mps2)[..., None],
                     native(self.command_history)[..., :-1],
                 ]
             )

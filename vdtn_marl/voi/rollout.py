@@ -140,7 +140,7 @@ def _rollout(
         zero_switch = torch.zeros(rows, f, dtype=torch.long, device=interval.device)
     leader = repeat_rows(
         twin.leader_accel_mps2(interval[: twin.batch_size, None] + steps), repeats
-    )  # [R, H]
+    )  # [R, H, Λ]
     # the linear CACC reads only part of the perfect observation: skip building the rest
     perfect_command = policy.perfect_command if _is_linear_cacc(policy) else None
     gap_error, speed_error = spacing_errors(state, pp)
@@ -157,8 +157,9 @@ def _rollout(
             switch = zero_switch
         after = integrator.integrate(state, leader[:, h], u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
+        follower = pp.topology.followers_of
         reward = control_reward(
-            gap_error, speed_error, after.command_mps2[:, 1:], state.command_mps2[:, 1:], pp
+            gap_error, speed_error, follower(after.command_mps2), follower(state.command_mps2), pp
         )
         collided = gaps_m(after.position_m, pp) <= 0
         reward = reward + as_float(collided) * pp.collision_penalty
