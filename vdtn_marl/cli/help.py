@@ -79,7 +79,15 @@ EXAMPLES = {
 
 # Keys of the machine and the invocation rather than of the experiment: eval does not take them
 # from the run (and takes the task from the checkpoint itself).
-EVAL_FRESH_KEYS = ("checkpoint", "resume", "device", "threads", "progress", "task")
+EVAL_FRESH_KEYS = (
+    "checkpoint",
+    "resume",
+    "device",
+    "threads",
+    "progress",
+    "task",
+    "warm_start_cache",
+)
 
 
 # --- help ----------------------------------------------------------------------------------

@@ -193,7 +193,7 @@ def _check_resume(run_cfg: Any, data: dict, hydra_cfg: Any) -> None:
     with open(old_file, encoding="utf-8") as handle:
         old = flatten(yaml.safe_load(handle) or {})
     new = flatten(data)
-    free = {"resume", "progress", "device"}
+    free = {"resume", "progress", "device", "warm_start_cache"}  # none changes a result
     # Keys the old run does not have (added to the schema since) are not compared.
     for key in sorted(set(old) & set(new)):
         if key not in free and old[key] != new[key]:

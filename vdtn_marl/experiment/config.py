@@ -166,6 +166,9 @@ class RunConfig:
     resume: bool = False
     checkpoint: str | None = None  # for `eval` (and to start from trained policies)
     progress: bool = True
+    # a directory where π*'s warm start is memoised and shared by the runs that would compute
+    # the same one (vdtn_marl/experiment/warm_start.py); results do not depend on it
+    warm_start_cache: str | None = None
 
     def twin_params(self) -> TwinParams:
         """The model of the run, with its scenario's topology."""
@@ -468,6 +471,8 @@ class BenchConfig:
     ``<scenario>/<method>/seed<k>``, e.g. ``[platoon4/greedy/*]``; empty: all) runs only the
     matching cells, shards splitting those; the report still covers every complete cell.
     ``run=false`` runs no cell and only writes the report of the complete ones.
+    ``share_warm_starts`` lets the cells that would compute the same warm start of π* share it
+    through ``<out_dir>/warm_starts`` (``warm_start_cache``; the results do not change).
     """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
@@ -480,10 +485,20 @@ class BenchConfig:
     report: bool = True  # write the report once every cell is complete
     device: str = "cpu"
     progress: bool = True
+    share_warm_starts: bool = True
 
 
 #: Keys a benchmark sets itself in every cell; a method or budget may not set them.
-BENCHMARK_RESERVED_KEYS = ("scenario", "seed", "device", "resume", "progress", "checkpoint", "task")
+BENCHMARK_RESERVED_KEYS = (
+    "scenario",
+    "seed",
+    "device",
+    "resume",
+    "progress",
+    "checkpoint",
+    "task",
+    "warm_start_cache",
+)
 _NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9_.+-]*"
 
 

@@ -43,6 +43,7 @@ from typing import Any
 import torch
 
 from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
+from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
@@ -52,8 +53,8 @@ from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.experiment import checkpoint, outputs
-from vdtn_marl.experiment.config import RunConfig, validate, validate_device
+from vdtn_marl.experiment import checkpoint, outputs, warm_start
+from vdtn_marl.experiment.config import RunConfig, to_dict, validate, validate_device
 from vdtn_marl.experiment.evaluate import ActingSystem, evaluate_stage, run_summary
 from vdtn_marl.io.files import (
     EVALUATION_FILE,
@@ -379,13 +380,36 @@ class JointOptimisation:
 
     def _warm_start_pi_star(self) -> None:
         """``control.warm_start=causal_mpc``: π* imitates the causal MPC before its first PPO
-        stage (:func:`~vdtn_marl.algos.imitation.distill_teacher`, on the training traces)."""
-        if self.cfg.control.warm_start == "none":
+        stage (:func:`~vdtn_marl.algos.imitation.distill_teacher`, on the training traces).
+        With ``warm_start_cache`` a run that would compute the same warm start as an earlier
+        one loads it (:mod:`.warm_start`)."""
+        cfg = self.cfg
+        if cfg.control.warm_start == "none":
             return
-        teacher = make_control_baseline("causal_mpc", self.params)
         intervals = min(200, self.params.episode_intervals)
+        memo_dir, key = cfg.warm_start_cache, None
+        if memo_dir:
+            key = warm_start.memo_key(
+                trainer=self.pi_star.state_dict(),
+                trainer_seed=self.pi_star.seed,
+                rng=rng_state(),
+                scenario=to_dict(cfg)["scenario"],
+                algo=to_dict(cfg)["algo"],
+                teacher=cfg.control.warm_start,
+                intervals=intervals,
+                device=str(self.device),
+                trace_file=warm_start.file_digest(cfg.scenario.trace_path),
+            )
+            entry = warm_start.load(memo_dir, key)
+            if entry is not None:
+                self.pi_star.load_state_dict(entry["trainer"])
+                set_rng_state(entry["rng"])
+                self.position["warm_start"] = {**entry["stats"], "memo": "loaded"}
+                _log.info("π*'s warm start loaded from %s", warm_start.memo_path(memo_dir, key))
+                return
+        teacher = make_control_baseline("causal_mpc", self.params)
         ticks = distillation_ticks(intervals=intervals)
-        with progress(ticks, "π* imitating the causal MPC", self.cfg.progress) as bar:
+        with progress(ticks, "π* imitating the causal MPC", cfg.progress) as bar:
             stats = distill_teacher(
                 self.pi_star,
                 teacher,
@@ -394,7 +418,12 @@ class JointOptimisation:
                 trace_source=self.train_traces,
                 progress=lambda n: (check_interrupt(), bar.update(n)),
             )
-        self.position["warm_start"] = {"teacher": self.cfg.control.warm_start, **asdict(stats)}
+        self.position["warm_start"] = {"teacher": cfg.control.warm_start, **asdict(stats)}
+        if key is not None:
+            warm_start.store(
+                memo_dir, key, self.pi_star.state_dict(), rng_state(), self.position["warm_start"]
+            )
+            self.position["warm_start"]["memo"] = "stored"
 
     def evaluate(self) -> dict[str, Any]:
         """The ``evaluate`` stage (:func:`.evaluate.evaluate_stage`): metrics of the acting

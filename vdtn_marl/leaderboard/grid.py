@@ -32,7 +32,9 @@ from vdtn_marl.io.files import SUMMARY_FILE, read_json
 
 MANIFEST_FILE = "benchmark.json"
 #: Config keys a resumed cell may change (the rest must match the cell's own run).
-FREE_KEYS = ("resume", "progress", "device", "threads", "checkpoint")
+FREE_KEYS = ("resume", "progress", "device", "threads", "checkpoint", "warm_start_cache")
+#: where ``share_warm_starts`` keeps the warm starts of π* the cells share, in ``out_dir``
+WARM_START_DIR = "warm_starts"
 
 
 @dataclass(frozen=True)

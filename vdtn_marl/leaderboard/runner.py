@@ -11,6 +11,7 @@ from vdtn_marl.experiment.config import BenchConfig, selected_cells
 from vdtn_marl.io.files import CONFIG_FILE, atomic_write_json, atomic_write_text, run_lock
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
+    WARM_START_DIR,
     Cell,
     check_eval_pairing,
     check_out_dir,
@@ -77,6 +78,8 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
                 if not cfg.run:  # report only: a missing cell stays missing
                     bar.update(1)
                     continue
+                if cfg.share_warm_starts:  # the results do not depend on it (warm_start.py)
+                    run_cfg.warm_start_cache = str(out_dir / WARM_START_DIR)
                 try:
                     run_cell(cell, data, run_cfg, out_dir)
                 except Exception as exc:  # one failing cell does not stop the grid
