@@ -16,7 +16,7 @@ import statistics
 import numpy as np
 
 import vdtn_marl
-from vdtn_marl.envs.base import check_kappa
+from vdtn_marl.core.reward import check_kappa
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.experiment.config import validate_device
 

@@ -15,14 +15,13 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
-from vdtn_marl.algos.control_baselines import CONTROL_BASELINES
 from vdtn_marl.algos.params import AlgoConfig
-from vdtn_marl.algos.rra_baselines import RRA_BASELINES
 from vdtn_marl.algos.trainer import ALGORITHMS
-from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
+from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
+from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import IVOI_BASELINES
 from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
@@ -102,14 +101,14 @@ class ControlConfig:
     # "none" starts PPO from the CACC prior
     warm_start: str = "causal_mpc"
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
-    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.algos.baselines)
+    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies)
     mpc_iterations: int | None = None
 
 
 @dataclass
 class RRAConfig:
     """Who allocates sub-channel × power for the V2V links, and the reward it learns from
-    (the reward's defaults are those of :class:`~vdtn_marl.envs.rra_reward.RRAReward`)."""
+    (the reward's defaults are those of :class:`~vdtn_marl.core.reward.RRAReward`)."""
 
     name: str = "jocc"
     kappa1: float = RRAReward.kappa1  # weight of V2I throughput

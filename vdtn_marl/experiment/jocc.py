@@ -42,7 +42,6 @@ from typing import Any
 
 import torch
 
-from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
@@ -65,7 +64,8 @@ from vdtn_marl.io.files import (
 from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
 from vdtn_marl.io.log import logged_stage, progress
 from vdtn_marl.io.metrics import MetricsLog
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies import make_control_baseline, make_rra_baseline
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference
 

@@ -14,8 +14,8 @@ import torch
 
 from vdtn_marl.core.interval import close_interval  # noqa: F401 - re-exported; lives in core
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.backend import repeat_rows, to_numpy, to_torch, xp
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.platoon import (
     PlatoonState,
     perfect_observation,

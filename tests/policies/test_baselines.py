@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import torch
 
-from vdtn_marl.algos.baselines import (
+from vdtn_marl.policies import (
     CAUSAL_MPC_ITERATIONS,
     CONTROL_BASELINES,
     ORACLE_MPC_ITERATIONS,
@@ -24,9 +24,9 @@ from vdtn_marl.algos.baselines import (
     make_rra_baseline,
     max_power_level,
 )
-from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim import link
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.channel import db_to_linear
 from vdtn_marl.sim.params import RadioParams, TwinParams
 from vdtn_marl.sim.platoon import control_reward, gaps_m, spacing_errors
