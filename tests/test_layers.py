@@ -208,3 +208,49 @@ def test_a_moved_module_is_the_new_one_at_its_old_path_and_warns(old):
     with pytest.warns(DeprecationWarning, match=MOVED[old]):
         assert importlib.import_module(old) is new
     assert import_graph()[old] == {MOVED[old]}  # a shim, nothing else
+
+
+@pytest.mark.parametrize(
+    "package", ["vdtn_marl.sim", "vdtn_marl.core", "vdtn_marl.policies", "vdtn_marl.voi"]
+)
+def test_a_lazy_package_gives_every_name_it_lists(package):
+    """Packages that import their modules on first use (so that their light parts read without
+    torch) list exactly the names they give, and give each from its module."""
+    import importlib
+
+    module = importlib.import_module(package)
+    homes = module._HOMES
+    assert set(module.__all__) - {"ConfigError"} == set(homes)
+    for name, home in homes.items():
+        assert getattr(module, name) is getattr(importlib.import_module(f"{package}.{home}"), name)
+    with pytest.raises(AttributeError, match="nope"):
+        module.nope  # noqa: B018
+
+
+def test_the_sim_package_still_gives_cacc_for_one_release():
+    import sys
+
+    from vdtn_marl import sim
+    from vdtn_marl.policies.cacc import CACCController
+
+    sys.modules.pop("vdtn_marl.sim.cacc", None)
+    with pytest.warns(DeprecationWarning, match="vdtn_marl.policies.cacc"):
+        assert sim.CACCController is CACCController
+
+
+def test_registry_entries_point_down_the_floors():
+    """Entries given as ``"module:Class"`` are imported by name, out of the import graph's
+    sight: each one in the package lies on its registry's floor or below."""
+    from vdtn_marl.algos.trainer import ALGORITHMS
+    from vdtn_marl.policies.registry import RRA_BASELINES
+    from vdtn_marl.voi.registry import IVOI_ESTIMATORS
+
+    for registry, room in (
+        (ALGORITHMS, "algos"),
+        (RRA_BASELINES, "policies"),
+        (IVOI_ESTIMATORS, "voi"),
+    ):
+        for target in registry.values():
+            module = target.partition(":")[0]
+            if module.startswith("vdtn_marl."):
+                assert module in import_graph() and LAYERS[_room(module)] <= LAYERS[room], target

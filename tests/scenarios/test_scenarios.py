@@ -19,7 +19,8 @@ from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.scenarios import SCENARIOS, get_scenario, scenario_params
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, PlatoonState
+from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
+from vdtn_marl.sim.platoon import PlatoonState
 from vdtn_marl.sim.twin import DigitalTwin
 
 NAMES = sorted(SCENARIOS)

@@ -67,7 +67,7 @@ from vdtn_marl.io.metrics import MetricsLog
 from vdtn_marl.policies import make_control_baseline, make_rra_baseline
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference
+from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, make_ivoi_estimator
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
 STAGE_POLICIES = {
@@ -280,7 +280,7 @@ class JointOptimisation:
             "bootstrap": rra.rollout_bootstrap if bootstrap is None else bootstrap,
             "baseline": baseline,
         }
-        return IVOI_ESTIMATORS[name].from_reference(reference, **options)
+        return make_ivoi_estimator(name, reference, **options)
 
     # ------------------------------------------------------------------ checkpoints
     @property

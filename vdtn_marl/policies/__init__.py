@@ -52,9 +52,9 @@ if TYPE_CHECKING:
         CONTROL_BASELINES,
         RRA_BASELINES,
         ControlBaseline,
-        RRABaseline,
         make_control_baseline,
         make_rra_baseline,
+        rra_baseline_class,
     )
     from vdtn_marl.policies.rra import (
         GreedyRRAPolicy,
@@ -75,7 +75,7 @@ _HOMES = {
     "CONTROL_BASELINES": "registry",
     "RRA_BASELINES": "registry",
     "ControlBaseline": "registry",
-    "RRABaseline": "registry",
+    "rra_baseline_class": "registry",
     "make_control_baseline": "registry",
     "make_rra_baseline": "registry",
     "GreedyRRAPolicy": "rra",
@@ -95,7 +95,6 @@ __all__ = [
     "GreedyRRAPolicy",
     "ORACLE_MPC_ITERATIONS",
     "OracleController",
-    "RRABaseline",
     "RRAFeatureLayout",
     "RRA_BASELINES",
     "RandomRRAPolicy",
@@ -104,6 +103,7 @@ __all__ = [
     "make_control_baseline",
     "make_rra_baseline",
     "max_power_level",
+    "rra_baseline_class",
 ]
 
 

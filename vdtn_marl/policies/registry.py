@@ -26,29 +26,25 @@ if TYPE_CHECKING:
 
 
 # ------------------------------------------------------------------------------------- RRA
-@dataclass(frozen=True)
-class RRABaseline:
-    """A registered RRA policy: ``"module:Class"`` of a class with
-    ``from_params(params: TwinParams, seed: int | None)``, imported when first built.
-    Calling the entry builds the policy: ``RRA_BASELINES[name](params, seed)``."""
-
-    policy: str
-
-    def policy_class(self) -> type:
-        module, _, name = self.policy.partition(":")
-        return getattr(importlib.import_module(module), name)
-
-    def __call__(self, params: TwinParams, seed: int | None = None) -> Any:
-        return self.policy_class().from_params(params, seed)
-
-
-#: The non-learned RRA policies, ``rra=<name>``. ``seed`` seeds the random one; the others are
-#: deterministic. Round robin and greedy transmit at the highest power level.
-RRA_BASELINES: dict[str, RRABaseline] = {
-    "random": RRABaseline("vdtn_marl.policies.rra:RandomRRAPolicy"),
-    "round_robin": RRABaseline("vdtn_marl.policies.rra:RoundRobinRRAPolicy"),
-    "greedy": RRABaseline("vdtn_marl.policies.rra:GreedyRRAPolicy"),
+#: The non-learned RRA policies, ``rra=<name>`` → ``"module:Class"`` of the policy, imported
+#: when first built: a class with ``from_params(params: TwinParams, seed: int | None)``.
+#: ``seed`` seeds the random one; the others are deterministic. Round robin and greedy transmit
+#: at the highest power level.
+RRA_BASELINES: dict[str, str] = {
+    "random": "vdtn_marl.policies.rra:RandomRRAPolicy",
+    "round_robin": "vdtn_marl.policies.rra:RoundRobinRRAPolicy",
+    "greedy": "vdtn_marl.policies.rra:GreedyRRAPolicy",
 }
+
+
+def rra_baseline_class(name: str) -> type:
+    """The class of the RRA baseline ``name`` (imported on first use)."""
+    if name not in RRA_BASELINES:
+        raise ValueError(
+            f"RRA baseline {name!r} is not one of {', '.join(repr(k) for k in RRA_BASELINES)}"
+        )
+    module, _, attribute = RRA_BASELINES[name].partition(":")
+    return getattr(importlib.import_module(module), attribute)
 
 
 # --------------------------------------------------------------------------------- control
@@ -125,12 +121,9 @@ def make_rra_baseline(
     Sizes (L links, M sub-channels, P power levels) come from the twin or the parameters
     (default ``TwinParams()``). ``seed`` seeds ``"random"`` (the others are deterministic).
     """
-    if name not in RRA_BASELINES:
-        raise ValueError(
-            f"RRA baseline {name!r} is not one of {', '.join(repr(k) for k in RRA_BASELINES)}"
-        )
+    policy_class = rra_baseline_class(name)
     _, params = _twin_and_params(twin_or_params, (TwinParams,))
-    return RRA_BASELINES[name](params, seed)
+    return policy_class.from_params(params, seed)
 
 
 def make_control_baseline(

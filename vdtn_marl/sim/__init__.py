@@ -12,8 +12,9 @@ from typing import TYPE_CHECKING
 from vdtn_marl.errors import ConfigError
 
 if TYPE_CHECKING:
+    from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
     from vdtn_marl.sim.params import PlatoonParams, RadioParams, TwinParams
-    from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, PlatoonState
+    from vdtn_marl.sim.platoon import PlatoonState
     from vdtn_marl.sim.topology import Topology, platoon_topology
     from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
 
@@ -22,7 +23,7 @@ _HOMES = {
     "PlatoonParams": "params",
     "RadioParams": "params",
     "TwinParams": "params",
-    "VEHICLE_OBS_FEATURES": "platoon",
+    "VEHICLE_OBS_FEATURES": "layout",
     "PlatoonState": "platoon",
     "Topology": "topology",
     "platoon_topology": "topology",
