@@ -22,8 +22,8 @@ from vdtn_marl.errors import ConfigError
 from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
 from vdtn_marl.sim.params import TwinParams
-from vdtn_marl.voi import IVOI_BASELINES
-from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
+from vdtn_marl.voi.registry import IVOI_BASELINES
+from vdtn_marl.voi.registry import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
 ALGOS = tuple(ALGORITHMS)  # algo.name (vdtn_marl/algos/trainer.py)
 # control.name: a learned policy or a baseline of the registry that may drive a run
@@ -32,7 +32,7 @@ RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = tuple(n for n, b in CONTROL_BASELINES.items() if b.solver_steps)  # mpc_iterations
 LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
 RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
-IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi.py)
+IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi/registry.py)
 VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
@@ -101,7 +101,7 @@ class ControlConfig:
     # "none" starts PPO from the CACC prior
     warm_start: str = "causal_mpc"
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
-    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies)
+    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies.mpc_oracle)
     mpc_iterations: int | None = None
 
 

@@ -47,6 +47,7 @@ from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
 from vdtn_marl.algos.trainer import Trainer, trainer_class
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
+from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
@@ -518,7 +519,7 @@ def main(argv: list[str] | None = None) -> int:
         help="output directory; one that already holds a run is refused unless --resume",
     )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--kappa1", type=float, default=0.5)
+    parser.add_argument("--kappa1", type=float, default=RRAReward.kappa1)
     parser.add_argument("--device", default="cpu")
     parser.add_argument(
         "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"

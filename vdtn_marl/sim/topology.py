@@ -38,10 +38,9 @@ reads them) are read without it.
 
 from __future__ import annotations
 
-import functools
 import numbers
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -215,7 +214,7 @@ def _rows(topology: Topology) -> _Rows:
     )
 
 
-@functools.cache
+@cache
 def _torch():
     """torch, imported when the first tensor comes (see the module doc)."""
     import torch
