@@ -38,9 +38,9 @@ import torch
 
 from vdtn_marl.algos.completion import train_completion_predictor
 from vdtn_marl.core.interval import IntervalEngine
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.io.files import atomic_write_json, script_command
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.completion import (
     CAM_ACCEL,
     CAM_AGE,

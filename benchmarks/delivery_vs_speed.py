@@ -30,10 +30,10 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from vdtn_marl.algos.baselines import RRA_BASELINES, make_control_baseline, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.data.traces import ConstantSpeedTraceSource
 from vdtn_marl.io.files import atomic_write_json
+from vdtn_marl.policies import RRA_BASELINES, make_control_baseline, make_rra_baseline
 from vdtn_marl.reporting.benchmarking import parse_names, parse_numbers, parse_seeds, provenance
 from vdtn_marl.reporting.tables import is_finite
 from vdtn_marl.sim import channel

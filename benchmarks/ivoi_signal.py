@@ -58,7 +58,6 @@ import torch
 from rich.console import Console
 from rich.table import Table
 
-from vdtn_marl.algos.baselines import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.experiment.api import loaded_checkpoints
@@ -66,6 +65,7 @@ from vdtn_marl.experiment.config import IVOI_ESTIMATORS
 from vdtn_marl.experiment.evaluate import EVAL_SEED_OFFSET
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.io.files import atomic_write_json
+from vdtn_marl.policies import RRA_BASELINES, make_rra_baseline
 from vdtn_marl.reporting.benchmarking import (
     checkpoint_run,
     ci_summary,

@@ -83,7 +83,6 @@ from typing import Any
 import torch
 from rich.table import Table
 
-from vdtn_marl.algos.baselines import make_rra_baseline
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy
@@ -100,6 +99,7 @@ from vdtn_marl.experiment.config import (
 from vdtn_marl.experiment.evaluate import EVAL_SEED_OFFSET
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.io.files import atomic_write_json, read_json
+from vdtn_marl.policies import make_rra_baseline
 from vdtn_marl.reporting.benchmarking import parse_names, parse_seeds, provenance, table_console
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import mean_ci

@@ -149,7 +149,7 @@ def bench_env(kappa1: float, seconds: float, seed: int, traces: str) -> dict:
 def bench_core(
     batch: int, device: str, backend: str, seconds: float, seed: int, traces: str
 ) -> dict:
-    from vdtn_marl.sim.cacc import CACCController
+    from vdtn_marl.policies.cacc import CACCController
     from vdtn_marl.sim.twin import DigitalTwin
 
     twin = DigitalTwin(

@@ -37,9 +37,7 @@ from pathlib import Path
 
 import torch
 
-from vdtn_marl.algos.baselines import CAUSAL_MPC_ITERATIONS, make_control_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.exact_oracle import ORACLE_HORIZON_INTERVALS
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import ActorPolicy, PPOTrainer
 from vdtn_marl.data import trace_source_names
@@ -48,8 +46,10 @@ from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.experiment.config import AlgoConfig, ScenarioConfig
 from vdtn_marl.io.files import atomic_write_json
 from vdtn_marl.io.log import progress
+from vdtn_marl.policies import CAUSAL_MPC_ITERATIONS, make_control_baseline
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.exact_oracle import ORACLE_HORIZON_INTERVALS
 from vdtn_marl.reporting.benchmarking import parse_names, parse_seeds, provenance
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 
 RESULTS = Path(__file__).parent / "results" / "training.json"

@@ -28,7 +28,7 @@ from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
 from vdtn_marl.data.selection import named_sources
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
 
 GROUP = "vehicle"  # the followers; one step of the "control" face = one 50 ms control interval
 OBS, ACTION, REWARD = (GROUP, "observation"), (GROUP, "action"), (GROUP, "reward")

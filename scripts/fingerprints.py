@@ -96,9 +96,9 @@ def torchrl_faces() -> dict[str, str]:
 
 
 def evaluation() -> dict[str, str]:
-    from vdtn_marl.algos.baselines import make_rra_baseline
     from vdtn_marl.algos.evaluate import evaluate_system
-    from vdtn_marl.sim.cacc import CACCController
+    from vdtn_marl.policies import make_rra_baseline
+    from vdtn_marl.policies.cacc import CACCController
     from vdtn_marl.sim.params import TwinParams
 
     params = TwinParams.from_overrides(episode_intervals=40)

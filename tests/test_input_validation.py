@@ -156,7 +156,7 @@ def test_cli_refuses_bad_traces_and_tasks_in_one_line_and_writes_nothing(
 
 def test_task_rra_needs_a_learned_rra_method():
     cfg = RunConfig(task="rra")
-    from vdtn_marl.algos.rra_baselines import RRA_BASELINES
+    from vdtn_marl.policies.registry import RRA_BASELINES
 
     for name in RRA_BASELINES:
         with pytest.raises(ConfigError, match=f"rra={name} has nothing to learn"):

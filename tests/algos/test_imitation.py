@@ -5,7 +5,6 @@ from dataclasses import replace
 import pytest
 import torch
 
-from vdtn_marl.algos.baselines import OracleController
 from vdtn_marl.algos.imitation import DistillationStats, distill_teacher, distillation_ticks
 from vdtn_marl.algos.ppo import PPOTrainer
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
@@ -17,7 +16,8 @@ from vdtn_marl.experiment.config import (
     ScenarioConfig,
 )
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies import OracleController
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 

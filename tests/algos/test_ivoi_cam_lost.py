@@ -6,9 +6,9 @@ import dataclasses
 import pytest
 import torch
 
-from vdtn_marl.algos.baselines import make_rra_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies import make_rra_baseline
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import RolloutIVoIEstimator

@@ -353,7 +353,7 @@ def _rra_rewards(reward: str, estimator=None, steps: int = 100):
     env = VDTNTorchRLEnv(
         "rra", batch_size=4, seed=3, reward=reward, kappa1=0.3, ivoi_estimator=estimator or "none"
     )
-    from vdtn_marl.algos.baselines import make_rra_baseline
+    from vdtn_marl.policies import make_rra_baseline
 
     greedy = make_rra_baseline("greedy", env.twin.params, 5)  # delivers CAMs (random rarely does)
     td = env.reset()

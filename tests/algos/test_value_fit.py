@@ -49,7 +49,7 @@ def test_the_bootstrapped_return_is_the_rollout_plus_the_discounted_tail_value()
     params = TwinParams.from_overrides(episode_intervals=40)
     twin = DigitalTwin(params, batch_size=3, seed=0, radio=False, backend="torch")
     twin.reset(seed=0)
-    from vdtn_marl.sim.cacc import CACCController
+    from vdtn_marl.policies.cacc import CACCController
 
     cacc = CACCController(params.platoon)
     state, interval = twin.platoon, torch.zeros(3, dtype=torch.long)

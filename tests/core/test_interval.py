@@ -12,10 +12,10 @@ import torch
 import vdtn_marl
 from vdtn_marl.core.interval import IntervalEngine, check_burn_in, check_callable
 from vdtn_marl.envs.base import ENGINE_PARTS
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin

@@ -10,10 +10,11 @@ from torchrl.envs.utils import check_env_specs
 import vdtn_marl
 from vdtn_marl.algos.completion import train_completion_predictor
 from vdtn_marl.data import TraceInfo, trace_set_provenance, trace_source_names
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.envs.torchrl import MODES as TORCHRL_MODES
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.sim import CACCController, DigitalTwin, TwinParams
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
+from vdtn_marl.sim import DigitalTwin, TwinParams
 from vdtn_marl.sim.completion import (
     CAM_ACCEL,
     CAM_AGE,

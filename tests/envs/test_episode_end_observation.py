@@ -11,7 +11,7 @@ import torch
 
 from vdtn_marl.envs import PlatoonControlEnv, TwoTimescaleEnv
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES
+from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
 
 T = 50
 INTERVALS = 3

@@ -160,7 +160,7 @@ def test_rollout_ivoi_is_zero_for_the_reference_action_and_negative_for_a_bad_on
     env.reset(seed=0)
     twin = env.twin
     estimator = RolloutIVoIEstimator(horizon_intervals=20)
-    from vdtn_marl.sim.cacc import CACCController
+    from vdtn_marl.policies.cacc import CACCController
 
     reference = CACCController(twin.params.platoon)(twin.vehicle_observation(perfect=True))
     record = twin.finish_interval(reference, perfect=True)

@@ -17,9 +17,10 @@ from torchrl.envs.utils import check_env_specs
 import vdtn_marl
 from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.scenarios import SCENARIOS, get_scenario, scenario_params
-from vdtn_marl.sim.cacc import CACCController
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, PlatoonState
+from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
+from vdtn_marl.sim.platoon import PlatoonState
 from vdtn_marl.sim.twin import DigitalTwin
 
 NAMES = sorted(SCENARIOS)
@@ -244,8 +245,8 @@ def test_an_unknown_scenario_is_one_clear_error():
 
 @pytest.mark.parametrize("name", NAMES)
 def test_the_oracles_model_every_topology_as_the_twin_moves_it(name):
-    from vdtn_marl.algos.exact_oracle import ExactOracleController
-    from vdtn_marl.algos.mpc_oracle import OracleController
+    from vdtn_marl.policies.exact_oracle import ExactOracleController
+    from vdtn_marl.policies.mpc_oracle import OracleController
     from vdtn_marl.sim.platoon import control_reward, gaps_m, spacing_errors
 
     intervals = 20

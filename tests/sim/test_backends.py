@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import RolloutIVoIEstimator

@@ -18,7 +18,7 @@ from typing import Any
 
 import torch
 
-from vdtn_marl.envs.rra_reward import REWARD_KINDS as LEARNED_RRA
+from vdtn_marl.core.reward import REWARD_KINDS as LEARNED_RRA
 from vdtn_marl.errors import CheckpointError
 from vdtn_marl.io.files import atomic_write_bytes
 

@@ -12,9 +12,9 @@ from collections.abc import Callable
 import torch
 
 from vdtn_marl.core.interval import IntervalEngine
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.completion import (
     CAM_ACCEL,
     CAM_AGE,

@@ -19,8 +19,8 @@ import torch
 
 from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.data.traces import TraceSource
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.io.interrupts import check_interrupt
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import IVoIEstimator

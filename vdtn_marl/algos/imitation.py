@@ -1,7 +1,7 @@
 """Warm start of the acceleration policy by imitating a model-predictive teacher (DAgger).
 
 PPO from the CACC prior improves on CACC by 7–8 % within the default budgets; the
-causal MPC (:class:`~vdtn_marl.algos.mpc_oracle.OracleController` with
+causal MPC (:class:`~vdtn_marl.policies.mpc_oracle.OracleController` with
 ``preview_intervals=0``) is 8–16 % better than CACC, and it is causal: it plans from the
 present state only. :func:`distill_teacher` copies such a teacher into the actor of a
 :class:`~vdtn_marl.algos.ppo.PPOTrainer` before PPO fine-tunes it (``control.warm_start`` in
@@ -87,8 +87,9 @@ def distill_teacher(
     Args:
         trainer: a PPOTrainer of the ``vehicle`` group with a continuous (TanhNormal) actor.
         teacher: twin → commands [B, F] (m/s²) from the twin's current state, e.g. an unbound
-            :class:`~vdtn_marl.algos.mpc_oracle.OracleController` (causal: ``preview_intervals=0``).
-            Its ``reset()``, if any, is called at the start of each round.
+            :class:`~vdtn_marl.policies.mpc_oracle.OracleController` (causal:
+            ``preview_intervals=0``). Its ``reset()``, if any, is called at the start of each
+            round.
         params: the twin model the scenarios run on (the trainer's environment's).
         rounds: DAgger rounds (round 0: teacher + noise drives; later: the student).
         scenarios: scenarios B per round; ``intervals`` control intervals each (≤ the episode).

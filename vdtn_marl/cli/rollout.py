@@ -16,7 +16,7 @@ import statistics
 import numpy as np
 
 import vdtn_marl
-from vdtn_marl.envs.base import check_kappa
+from vdtn_marl.core.reward import RRAReward, check_kappa
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.experiment.config import validate_device
 
@@ -86,7 +86,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="vdtn-marl rollout", description=__doc__.split("\n")[0])
     parser.add_argument("--intervals", type=int, default=40, help="50 ms control intervals (>= 1)")
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--kappa1", type=float, default=0.5, help="κ1 in [0, 1]; κ2 = 1 − κ1")
+    parser.add_argument(
+        "--kappa1", type=float, default=RRAReward.kappa1, help="κ1 in [0, 1]; κ2 = 1 − κ1"
+    )
     parser.add_argument("--device", default="cpu")
     args = parser.parse_args(argv)
     if args.intervals < 1:

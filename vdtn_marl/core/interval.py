@@ -16,7 +16,7 @@ engine holds the twin and what acts around it, all optional:
 - ``ivoi_estimator``: ξ at each interval's end (an object with ``__call__(twin, record)`` and
   optionally ``needs_command_if_lost``, :mod:`vdtn_marl.voi`);
 - ``reward_fn``: the RRA reward (``per_subframe(outcome, bandwidth_hz, subframe_s)`` and
-  ``at_interval_end(xi, lost)``, :class:`vdtn_marl.envs.rra_reward.RRAReward`).
+  ``at_interval_end(xi, lost)``, :class:`vdtn_marl.core.reward.RRAReward`).
 
 The engine is backend-agnostic: it hands the twin what its backend takes (torch tensors, or
 what a policy returns on the NumPy backend) and never converts the state. Masks are bool

@@ -7,19 +7,19 @@ The environments are thin: they translate between PettingZoo's dicts and the twi
 from __future__ import annotations
 
 import functools
-import numbers
 
 import gymnasium
 import numpy as np
 import torch
 from pettingzoo import ParallelEnv
 
+from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario, rra_name, vehicle_name
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL
 from vdtn_marl.sim.platoon import vehicle_observation_bounds
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord, resolve_device
+from vdtn_marl.voi import make_ivoi_estimator
 
 RENDER_MODES = ("rgb_array",)
 
@@ -48,20 +48,12 @@ def rra_action_space(twin: DigitalTwin) -> gymnasium.spaces.Discrete:
     return gymnasium.spaces.Discrete(twin.params.radio.num_actions)
 
 
-def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
-    """κ1, κ2 ∈ [0, 1] with κ1 + κ2 = 1; κ2 defaults to 1 − κ1."""
-    for name, value in (("kappa1", kappa1), ("kappa2", kappa2)):
-        if name == "kappa2" and value is None:
-            kappa2 = value = 1.0 - kappa1
-        if not isinstance(value, numbers.Real) or isinstance(value, bool):
-            raise ConfigError(f"{name}={value!r} must be a number in [0, 1]")
-        if not 0.0 <= value <= 1.0:
-            raise ConfigError(f"{name}={value!r} is outside the allowed range [0, 1]")
-    if abs(kappa1 + kappa2 - 1.0) > KAPPA_SUM_ABS_TOL:
-        raise ConfigError(
-            f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})"
-        )
-    return float(kappa1), float(kappa2)
+def paid_ivoi_estimator(reward_fn: RRAReward, ivoi_estimator, horizon_intervals: int):
+    """The IVoI estimator whose ξ ``reward_fn`` pays: ``ivoi_estimator`` (a name of
+    :data:`~vdtn_marl.voi.IVOI_ESTIMATORS`, ``"none"`` or an object; ``"rollout"`` over
+    ``horizon_intervals``) when the reward uses ξ, else ξ = 0 (nothing is estimated)."""
+    options = {"horizon_intervals": horizon_intervals} if ivoi_estimator == "rollout" else {}
+    return make_ivoi_estimator(ivoi_estimator if reward_fn.uses_ivoi else "none", **options)
 
 
 def check_one_trace_choice(trace_source, model_kwargs: dict) -> None:

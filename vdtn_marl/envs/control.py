@@ -52,7 +52,7 @@ from vdtn_marl.envs.base import (
     vehicle_action_space,
     vehicle_observation_space,
 )
-from vdtn_marl.envs.policies import RandomRRAPolicy
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.completion import make_completion
 
 #: Per-follower info before the first interval closes (same keys and types as interval_infos).

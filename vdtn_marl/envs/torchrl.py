@@ -41,18 +41,19 @@ from vdtn_marl.core.interval import (
     check_burn_in,
     check_estimator_has_control,
 )
+from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.base import (
     EngineBacked,
     check_one_trace_choice,
+    paid_ivoi_estimator,
     rra_observation_space,
     vehicle_observation_space,
 )
-from vdtn_marl.envs.policies import RandomRRAPolicy
-from vdtn_marl.envs.rra_reward import RRAReward, paid_ivoi_estimator
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
@@ -84,7 +85,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         control_module: ``"rra"`` only: impaired vehicle observations [B, F, 8] → commands
             [B, F] (default: linear CACC).
         reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty: the RRA reward
-            (:class:`~vdtn_marl.envs.rra_reward.RRAReward`), ``"rra"``/``"joint"`` only.
+            (:class:`~vdtn_marl.core.reward.RRAReward`), ``"rra"``/``"joint"`` only.
         ivoi_estimator, ivoi_horizon_intervals: the VoI estimator (:mod:`vdtn_marl.voi`).
         trace_source: leader trace set (default: the model's ``traces``).
         completion, completion_predictor: completion of stale CAM content in the impaired

@@ -47,16 +47,17 @@ import numpy as np
 import torch
 
 from vdtn_marl.core.interval import IntervalEngine, check_estimator_has_control
+from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
+    paid_ivoi_estimator,
     rra_action_space,
     rra_observation_space,
     vehicle_action_space,
     vehicle_observation_space,
 )
 from vdtn_marl.envs.control import INITIAL_INTERVAL_INFO, interval_infos
-from vdtn_marl.envs.rra_reward import RRAReward, paid_ivoi_estimator
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.voi import IVoIEstimator
 

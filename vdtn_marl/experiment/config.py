@@ -15,16 +15,15 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass
 from typing import Any
 
-from vdtn_marl.algos.control_baselines import CONTROL_BASELINES
 from vdtn_marl.algos.params import AlgoConfig
-from vdtn_marl.algos.rra_baselines import RRA_BASELINES
 from vdtn_marl.algos.trainer import ALGORITHMS
-from vdtn_marl.envs.rra_reward import REWARD_KINDS, RRAReward
+from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
-from vdtn_marl.sim.params import KAPPA_SUM_ABS_TOL, TwinParams
-from vdtn_marl.voi import IVOI_BASELINES
-from vdtn_marl.voi import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
+from vdtn_marl.sim.params import TwinParams
+from vdtn_marl.voi.registry import IVOI_BASELINES
+from vdtn_marl.voi.registry import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
 ALGOS = tuple(ALGORITHMS)  # algo.name (vdtn_marl/algos/trainer.py)
 # control.name: a learned policy or a baseline of the registry that may drive a run
@@ -33,7 +32,7 @@ RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = tuple(n for n, b in CONTROL_BASELINES.items() if b.solver_steps)  # mpc_iterations
 LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
 RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
-IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi.py)
+IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi/registry.py)
 VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
@@ -102,14 +101,14 @@ class ControlConfig:
     # "none" starts PPO from the CACC prior
     warm_start: str = "causal_mpc"
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
-    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.algos.baselines)
+    # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies.mpc_oracle)
     mpc_iterations: int | None = None
 
 
 @dataclass
 class RRAConfig:
     """Who allocates sub-channel × power for the V2V links, and the reward it learns from
-    (the reward's defaults are those of :class:`~vdtn_marl.envs.rra_reward.RRAReward`)."""
+    (the reward's defaults are those of :class:`~vdtn_marl.core.reward.RRAReward`)."""
 
     name: str = "jocc"
     kappa1: float = RRAReward.kappa1  # weight of V2I throughput

@@ -24,7 +24,7 @@ from vdtn_marl import __version__
 from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.experiment.config import RunConfig, to_dict
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import expected_voi, mean_ci
 

@@ -42,13 +42,13 @@ from typing import Any
 
 import torch
 
-from vdtn_marl.algos.baselines import make_control_baseline, make_rra_baseline
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
 from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
 from vdtn_marl.algos.trainer import Trainer, trainer_class
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
+from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
@@ -66,9 +66,10 @@ from vdtn_marl.io.files import (
 from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
 from vdtn_marl.io.log import logged_stage, progress
 from vdtn_marl.io.metrics import MetricsLog
-from vdtn_marl.sim.cacc import CACCController
+from vdtn_marl.policies import make_control_baseline, make_rra_baseline
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.completion import make_completion
-from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference
+from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, make_ivoi_estimator
 
 STAGES = ("control_perfect", "control_impaired", "rra", "evaluate")
 STAGE_POLICIES = {
@@ -281,7 +282,7 @@ class JointOptimisation:
             "bootstrap": rra.rollout_bootstrap if bootstrap is None else bootstrap,
             "baseline": baseline,
         }
-        return IVOI_ESTIMATORS[name].from_reference(reference, **options)
+        return make_ivoi_estimator(name, reference, **options)
 
     # ------------------------------------------------------------------ checkpoints
     @property
@@ -547,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
         help="output directory; one that already holds a run is refused unless --resume",
     )
     parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--kappa1", type=float, default=0.5)
+    parser.add_argument("--kappa1", type=float, default=RRAReward.kappa1)
     parser.add_argument("--device", default="cpu")
     parser.add_argument(
         "--resume", action="store_true", help="continue the run in --run-dir from its checkpoint"

@@ -12,7 +12,7 @@ base class), one line in :data:`vdtn_marl.scenarios.SCENARIOS` and one YAML in
   per follower and one RRA agent per V2V link, named by vehicle id, so names stay unique in any
   topology;
 - their observation layouts: every agent observes the features of
-  :data:`~vdtn_marl.sim.platoon.VEHICLE_OBS_FEATURES` or
+  :data:`~vdtn_marl.sim.layout.VEHICLE_OBS_FEATURES` or
   :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES` relative to its own predecessor and link
   (one definition each, in ``sim/``), so a new topology needs no new layout.
 
@@ -25,9 +25,8 @@ from __future__ import annotations
 from dataclasses import replace
 from typing import ClassVar
 
-from vdtn_marl.sim.layout import RRA_OBS_FEATURES, Feature
+from vdtn_marl.sim.layout import RRA_OBS_FEATURES, VEHICLE_OBS_FEATURES, Feature
 from vdtn_marl.sim.params import PlatoonParams, TwinParams
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES
 from vdtn_marl.sim.topology import Topology
 
 

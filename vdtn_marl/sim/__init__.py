@@ -1,14 +1,37 @@
-"""The digital twin's physics: batched torch tensors, no RL API (docs/model.md)."""
+"""The digital twin's physics: batched torch tensors, no RL API (docs/model.md).
+
+Every name is imported on first use, so that reading the parameters (:mod:`.params`, which the
+config schema does) imports neither the twin nor torch.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
 
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.cacc import CACCController
-from vdtn_marl.sim.params import PlatoonParams, RadioParams, TwinParams
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, PlatoonState
-from vdtn_marl.sim.topology import Topology, platoon_topology
-from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
+
+if TYPE_CHECKING:
+    from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
+    from vdtn_marl.sim.params import PlatoonParams, RadioParams, TwinParams
+    from vdtn_marl.sim.platoon import PlatoonState
+    from vdtn_marl.sim.topology import Topology, platoon_topology
+    from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
+
+#: name → the module of this package that defines it
+_HOMES = {
+    "PlatoonParams": "params",
+    "RadioParams": "params",
+    "TwinParams": "params",
+    "VEHICLE_OBS_FEATURES": "layout",
+    "PlatoonState": "platoon",
+    "Topology": "topology",
+    "platoon_topology": "topology",
+    "DigitalTwin": "twin",
+    "IntervalRecord": "twin",
+}
 
 __all__ = [
-    "CACCController",
     "ConfigError",
     "DigitalTwin",
     "IntervalRecord",
@@ -20,3 +43,18 @@ __all__ = [
     "VEHICLE_OBS_FEATURES",
     "platoon_topology",
 ]
+
+
+def __getattr__(name: str):
+    if name == "CACCController":  # moved to vdtn_marl.policies; its old path warns
+        from vdtn_marl.sim.cacc import CACCController
+
+        return CACCController
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))

@@ -42,8 +42,9 @@ import torch
 from torch import nn
 
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
 from vdtn_marl.sim.params import PlatoonParams
-from vdtn_marl.sim.platoon import VEHICLE_OBS_FEATURES, IntervalIntegrator
+from vdtn_marl.sim.platoon import IntervalIntegrator
 
 __all__ = [
     "COMPLETION_MODES",

@@ -1,4 +1,5 @@
-"""The one definition of the RRA observation layout (docs/model.md §4.6).
+"""The one definition of the observation layouts: the vehicle agents' features
+(:data:`VEHICLE_OBS_FEATURES`, docs/model.md §2.4) and the RRA layout (docs/model.md §4.6).
 
 Every RRA agent (one per V2V link: the follower's predecessor → the follower, i−1 → i in one
 platoon; docs/model.md §6) observes, per subframe, the features of :data:`RRA_OBS_FEATURES` in
@@ -41,6 +42,20 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+#: Vehicle observation features, in order (docs/model.md §2.4): what every vehicle agent
+#: observes of itself, its predecessor and the CAM it holds (filled by
+#: :func:`vdtn_marl.sim.platoon.vehicle_observation`).
+VEHICLE_OBS_FEATURES = (
+    "gap_error_m",
+    "speed_error_mps",
+    "accel_mps2",
+    "cam_pred_accel_mps2",
+    "cam_pred_command_mps2",
+    "cam_delay_ms",
+    "cam_age_ms",
+    "prev_command_mps2",
+)
 
 #: RRA CSI features are dB ratios in units of this many dB, clipped to ``RRA_OBS_GAIN_CLIP``.
 RRA_OBS_GAIN_SCALE_DB = 10.0

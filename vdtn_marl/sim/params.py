@@ -16,10 +16,6 @@ from typing import Any
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim.topology import Topology, platoon_topology
 
-KAPPA_SUM_ABS_TOL = 1e-6
-"""How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
-config validation and the environments."""
-
 
 def _check_types(params: Any) -> None:
     """Every ``int`` field holds an integer and every ``float`` field a real number (bools,

@@ -26,19 +26,9 @@ import numpy as np
 import torch
 
 from vdtn_marl.sim.backend import cast_like, clamp, repeat_rows, stack, to_numpy, to_torch, xp
+from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES  # noqa: F401 - re-exported; one definition, in layout
 from vdtn_marl.sim.params import PlatoonParams
 
-#: Vehicle observation features, in order (docs/model.md §2.4).
-VEHICLE_OBS_FEATURES = (
-    "gap_error_m",
-    "speed_error_mps",
-    "accel_mps2",
-    "cam_pred_accel_mps2",
-    "cam_pred_command_mps2",
-    "cam_delay_ms",
-    "cam_age_ms",
-    "prev_command_mps2",
-)
 GAP_ERROR_BOUND_M = 200.0
 SPEED_ERROR_BOUND_MPS = 50.0
 CAM_AGE_BOUND_MS = 10_000.0
@@ -256,7 +246,8 @@ def vehicle_observation(
     cam_age_ms: torch.Tensor,
     params: PlatoonParams,
 ) -> torch.Tensor:
-    """Follower observations [B, F, 8] in the order of :data:`VEHICLE_OBS_FEATURES`.
+    """Follower observations [B, F, 8] in the order of
+    :data:`~vdtn_marl.sim.layout.VEHICLE_OBS_FEATURES`.
 
     Own gap/speed error and acceleration come from local sensing at the interval start;
     ``cam_content`` [B, F, 2] is the predecessor's (acceleration, command) from the CAM used

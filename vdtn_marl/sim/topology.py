@@ -31,20 +31,26 @@ A :class:`Topology` holds only tuples (it is hashable and travels in checkpoints
 The physics takes rows with :meth:`Topology.followers_of`, :meth:`Topology.predecessors_of` and
 :meth:`Topology.leaders_of`, and puts leader and follower rows back together with
 :meth:`Topology.assemble`: gathers with index arrays (slices where the rows are contiguous, as
-in PF), on torch tensors or NumPy arrays, never a loop over vehicles.
+in PF), on torch tensors or NumPy arrays, never a loop over vehicles. The module imports torch
+only when it is given a tensor, so the parameters and the scenarios (and the config schema that
+reads them) are read without it.
 """
 
 from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache, lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.backend import Array, cat
+
+if TYPE_CHECKING:
+    import torch
+
+    from vdtn_marl.sim.backend import Array
 
 LEADER = -1
 """``predecessor`` of a vehicle that leads (follows a speed trace)."""
@@ -141,7 +147,10 @@ class Topology:
     def assemble(self, leader_rows: Array, follower_rows: Array) -> Array:
         """[B, N] from leader rows [B, Λ] and follower rows [B, F] (the inverse of
         :meth:`leaders_of` and :meth:`followers_of`)."""
-        joined = cat([leader_rows, follower_rows], axis=1)
+        if isinstance(leader_rows, np.ndarray):
+            joined = np.concatenate([leader_rows, follower_rows], axis=1)
+        else:
+            joined = _torch().cat([leader_rows, follower_rows], dim=1)
         order = _rows(self).assemble_index
         return joined if order is None else joined[:, _index(order, joined)]
 
@@ -205,8 +214,17 @@ def _rows(topology: Topology) -> _Rows:
     )
 
 
+@cache
+def _torch():
+    """torch, imported when the first tensor comes (see the module doc)."""
+    import torch
+
+    return torch
+
+
 @lru_cache(maxsize=256)
 def _torch_index(rows: tuple[int, ...], device: torch.device) -> torch.Tensor:
+    torch = _torch()
     return torch.tensor(rows, dtype=torch.long, device=device)
 
 

@@ -17,29 +17,56 @@ by its ``from_reference``. A new estimator is its class with ``from_reference``,
 the registry, and nothing else: the config's choices, the environments and the JOCC loop read
 the registry.
 
-Modules: :mod:`.rollout` (discounted rollouts of a reference policy, :class:`RolloutValue`),
-:mod:`.estimators` (the estimators, their registry, :func:`close_interval`) and :mod:`.evoi`
-(EVoI and Student-t intervals); every name is importable from :mod:`vdtn_marl.voi`.
+Modules: :mod:`.registry` (:data:`IVOI_ESTIMATORS`, the estimators' names), :mod:`.rollout`
+(discounted rollouts of a reference policy, :class:`RolloutValue`), :mod:`.estimators` (the
+estimators, :func:`close_interval`) and :mod:`.evoi` (EVoI and Student-t intervals); every name
+is importable from :mod:`vdtn_marl.voi`, each on first use, so that reading the registry imports
+neither torch nor the twin.
 """
 
-from vdtn_marl.voi.estimators import (
-    IVOI_BASELINES,
-    IVOI_ESTIMATORS,
-    IVoIEstimator,
-    RolloutIVoIEstimator,
-    TDIVoIEstimator,
-    VoIReference,
-    ZeroIVoIEstimator,
-    close_interval,
-    make_ivoi_estimator,
-)
-from vdtn_marl.voi.evoi import expected_voi, mean_ci
-from vdtn_marl.voi.rollout import (
-    Policy,
-    RolloutValue,
-    bootstrapped_return,
-    discounted_rollout,
-)
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from vdtn_marl.voi.estimators import (
+        IVoIEstimator,
+        RolloutIVoIEstimator,
+        TDIVoIEstimator,
+        VoIReference,
+        ZeroIVoIEstimator,
+        close_interval,
+        make_ivoi_estimator,
+    )
+    from vdtn_marl.voi.evoi import expected_voi, mean_ci
+    from vdtn_marl.voi.registry import IVOI_BASELINES, IVOI_ESTIMATORS, ivoi_estimator_class
+    from vdtn_marl.voi.rollout import (
+        Policy,
+        RolloutValue,
+        bootstrapped_return,
+        discounted_rollout,
+    )
+
+#: name → the module of this package that defines it
+_HOMES = {
+    "IVOI_BASELINES": "registry",
+    "IVOI_ESTIMATORS": "registry",
+    "ivoi_estimator_class": "registry",
+    "IVoIEstimator": "estimators",
+    "RolloutIVoIEstimator": "estimators",
+    "TDIVoIEstimator": "estimators",
+    "VoIReference": "estimators",
+    "ZeroIVoIEstimator": "estimators",
+    "close_interval": "estimators",
+    "make_ivoi_estimator": "estimators",
+    "expected_voi": "evoi",
+    "mean_ci": "evoi",
+    "Policy": "rollout",
+    "RolloutValue": "rollout",
+    "bootstrapped_return": "rollout",
+    "discounted_rollout": "rollout",
+}
 
 __all__ = [
     "IVOI_BASELINES",
@@ -55,6 +82,18 @@ __all__ = [
     "close_interval",
     "discounted_rollout",
     "expected_voi",
+    "ivoi_estimator_class",
     "make_ivoi_estimator",
     "mean_ci",
 ]
+
+
+def __getattr__(name: str):
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_HOMES))

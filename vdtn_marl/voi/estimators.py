@@ -1,8 +1,8 @@
-"""The IVoI estimators (docs/model.md §5) and their registry :data:`IVOI_ESTIMATORS`: the
-one-step TD error of v* (:class:`TDIVoIEstimator`), counterfactual rollouts
-(:class:`RolloutIVoIEstimator`) and ξ = 0 (:class:`ZeroIVoIEstimator`). :func:`close_interval`,
-which finishes a twin interval with what an estimator needs, lives in
-:mod:`vdtn_marl.core.interval` and is re-exported here."""
+"""The IVoI estimators (docs/model.md §5), named in the registry
+:data:`~vdtn_marl.voi.registry.IVOI_ESTIMATORS`: the one-step TD error of v*
+(:class:`TDIVoIEstimator`), counterfactual rollouts (:class:`RolloutIVoIEstimator`) and ξ = 0
+(:class:`ZeroIVoIEstimator`). :func:`close_interval`, which finishes a twin interval with what an
+estimator needs, lives in :mod:`vdtn_marl.core.interval` and is re-exported here."""
 
 from __future__ import annotations
 
@@ -14,13 +14,14 @@ import torch
 
 from vdtn_marl.core.interval import close_interval  # noqa: F401 - re-exported; lives in core
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.backend import repeat_rows, to_numpy, to_torch, xp
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.platoon import (
     PlatoonState,
     perfect_observation,
 )
 from vdtn_marl.sim.twin import DigitalTwin, IntervalRecord
+from vdtn_marl.voi.registry import IVOI_BASELINES, ivoi_estimator_class
 from vdtn_marl.voi.rollout import (
     Policy,
     _check_rollout,
@@ -34,10 +35,6 @@ class IVoIEstimator(Protocol):
     def __call__(self, twin: DigitalTwin, record: IntervalRecord) -> torch.Tensor:
         """IVoI ξ of every follower for the interval in ``record``, [B, F]."""
         ...
-
-
-#: what ξ compares the acting system's command with (:class:`RolloutIVoIEstimator`)
-IVOI_BASELINES = ("optimal", "cam_lost")
 
 
 @dataclass(frozen=True)
@@ -275,29 +272,18 @@ class ZeroIVoIEstimator:
         return torch.zeros_like(record.reward)
 
 
-#: The named IVoI estimators, name → class with ``from_reference(reference, **options)``.
-IVOI_ESTIMATORS: dict[str, type] = {
-    "td": TDIVoIEstimator,
-    "rollout": RolloutIVoIEstimator,
-}
-
-
 def make_ivoi_estimator(
     spec: str | IVoIEstimator | None, reference: VoIReference | None = None, **options
 ) -> IVoIEstimator:
-    """A name of :data:`IVOI_ESTIMATORS` built on ``reference`` with ``options``, ``"none"``
-    (ξ = 0) or an estimator object. Without ``reference`` one is made of the options
-    ``reference_policy``, ``value``, ``terminal_value`` and ``discount`` (the constructors'
-    keywords), so ``make_ivoi_estimator("td", value=critic)`` and
+    """A name of :data:`~vdtn_marl.voi.registry.IVOI_ESTIMATORS` built on ``reference`` with
+    ``options``, ``"none"`` (ξ = 0) or an estimator object. Without ``reference`` one is made
+    of the options ``reference_policy``, ``value``, ``terminal_value`` and ``discount`` (the
+    constructors' keywords), so ``make_ivoi_estimator("td", value=critic)`` and
     ``make_ivoi_estimator("rollout", horizon_intervals=5)`` work as before."""
     if spec is None or spec == "none":
         return ZeroIVoIEstimator()
     if isinstance(spec, str):
-        if spec not in IVOI_ESTIMATORS:
-            raise ValueError(
-                f"ivoi_estimator={spec!r} is not one of "
-                f"{', '.join(repr(k) for k in (*IVOI_ESTIMATORS, 'none'))} (or an object)"
-            )
+        estimator_class = ivoi_estimator_class(spec)
         if reference is None:
             value = options.pop("value", None)
             terminal = options.pop("terminal_value", None)
@@ -308,7 +294,7 @@ def make_ivoi_estimator(
             )
             if spec == "rollout":  # the constructor's default: no bootstrap without a value
                 options.setdefault("bootstrap", terminal is not None)
-        return IVOI_ESTIMATORS[spec].from_reference(reference, **options)
+        return estimator_class.from_reference(reference, **options)
     if not callable(spec):
         raise TypeError(f"ivoi_estimator={spec!r} must be callable as estimator(twin, record)")
     return spec

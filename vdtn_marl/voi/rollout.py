@@ -9,8 +9,8 @@ from collections.abc import Callable
 import numpy as np
 import torch
 
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.backend import as_float, repeat_rows, to_numpy, to_torch
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.platoon import (
     IntervalIntegrator,
     PlatoonState,

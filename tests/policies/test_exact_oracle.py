@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 import torch
 
-from vdtn_marl.algos.baselines import make_control_baseline
 from vdtn_marl.algos.evaluate import evaluate_system
-from vdtn_marl.algos.exact_oracle import ExactOracleController
+from vdtn_marl.policies import make_control_baseline
+from vdtn_marl.policies.exact_oracle import ExactOracleController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 
@@ -121,7 +121,7 @@ def test_a_program_that_fails_with_presolve_is_solved_without_it(monkeypatch):
     # solves without presolve: the oracle must fall back instead of aborting the evaluation
     import scipy.optimize
 
-    from vdtn_marl.algos import exact_oracle
+    from vdtn_marl.policies import exact_oracle
 
     # a synthetic scenario that dual simplex solves once presolve is off (which attempt
     # succeeds depends on the program; LP_ATTEMPTS tries all four)

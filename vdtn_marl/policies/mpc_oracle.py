@@ -2,8 +2,8 @@
 (``control=causal_mpc``): :class:`OracleController`, receding-horizon optimisation of the
 control reward on the twin's true state, with the leader's future trace known (preview) or
 extrapolated from its present acceleration. Build them by name with
-:func:`vdtn_marl.algos.baselines.make_control_baseline`; the exact lower bound is
-:class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`.
+:func:`vdtn_marl.policies.make_control_baseline`; the exact lower bound is
+:class:`~vdtn_marl.policies.exact_oracle.ExactOracleController`.
 """
 
 from __future__ import annotations
@@ -14,11 +14,11 @@ from contextlib import contextmanager
 
 import torch
 
-from vdtn_marl.algos.exact_oracle import (
+from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.policies.exact_oracle import (
     ORACLE_HORIZON_INTERVALS,
     check_bound_observation,
 )
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.platoon import (
     PlatoonState,
@@ -48,7 +48,7 @@ ORACLE_MPC_ITERATIONS = 400
 """Adam steps per interval of the oracle (:class:`OracleController`'s default, ``control=oracle``).
 
 On perfect observation, held-out scenarios × 10 s, against the exact optimum of
-:class:`~vdtn_marl.algos.exact_oracle.ExactOracleController`: 128 synthetic scenarios
+:class:`~vdtn_marl.policies.exact_oracle.ExactOracleController`: 128 synthetic scenarios
 (``benchmarks/training.py``), 400 steps +1.3 % (0.03862 vs 0.03814; 408 s on one CPU thread of
 a machine busy with other runs) and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps +3.8 %
 and 400 steps +0.26 % (0.02887 vs 0.02879); 16 scenarios of the stop-and-go UDDS cycle (data
@@ -86,7 +86,7 @@ class OracleController:
     approximate, so it is an upper estimate of the lower bound on control cost: with the default
     :data:`ORACLE_MPC_ITERATIONS` steps, on perfect observation, its cost was 0.3 % (synthetic
     traces) to 3.6 % (UDDS) above the exact optimum that
-    :class:`~vdtn_marl.algos.exact_oracle.ExactOracleController` computes; with 60 steps it was
+    :class:`~vdtn_marl.policies.exact_oracle.ExactOracleController` computes; with 60 steps it was
     19–42 % above it, and on the stop-and-go UDDS cycle worse than CACC.
 
     Planning model: the interval map of the twin's own :class:`IntervalIntegrator`

@@ -33,12 +33,12 @@ matrices depend only on H and the platoon parameters and are built once; scenari
 the right-hand sides (leader trajectory, initial state). Measured (2 CPU cores, one thread):
 about 1.2 s per scenario for H = 200 intervals (10 s) and 2.4 s with the default 6 s tail (H =
 320), i.e. about 5 min for 128 scenarios of 10 s; the plan replayed in the twin earns the LP's
-optimum to float32 precision (tests/algos/test_exact_oracle.py). The loop over scenarios is a
+optimum to float32 precision (tests/policies/test_exact_oracle.py). The loop over scenarios is a
 Python loop (one LP each), outside the simulator's hot path.
 
 With the 6 s tail, the exact optimum cost 0.0381 per follower and interval on the 128
 synthetic scenarios of ``benchmarks/training.py`` (where
-:class:`~vdtn_marl.algos.mpc_oracle.OracleController`, the receding-horizon MPC with a
+:class:`~vdtn_marl.policies.mpc_oracle.OracleController`, the receding-horizon MPC with a
 subgradient solver, cost 0.0453: 19 % more), and 0.046 on 8 UDDS scenarios (the MPC: 0.065,
 42 % more, and more than CACC's 0.055). That MPC is therefore not the lower bound its name
 suggests; see docs/training.md.
@@ -70,7 +70,7 @@ LP_ATTEMPTS: tuple[tuple[str, dict], ...] = (
 
 ORACLE_HORIZON_INTERVALS = 120
 """How far the oracles look ahead (intervals of 50 ms: 6 s): the receding horizon of
-:class:`~vdtn_marl.algos.mpc_oracle.OracleController` and the tail that
+:class:`~vdtn_marl.policies.mpc_oracle.OracleController` and the tail that
 :class:`ExactOracleController` plans beyond the intervals it is scored on."""
 
 BLOCKS = ("u", "p", "v", "a", "t_p", "t_v", "t_u", "t_j", "s")

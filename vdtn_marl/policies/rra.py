@@ -1,15 +1,15 @@
-"""Radio resource allocation (RRA) heuristics: round robin and greedy (best estimated SINR).
+"""Radio resource allocation (RRA) heuristics: random (the environments' default), round robin
+and greedy (best estimated SINR).
 
 They map RRA observations ``[..., L, D]`` (NumPy or torch, docs/model.md §4.6) to integer
-actions ``[..., L]`` of the same kind, like :class:`~vdtn_marl.envs.policies.RandomRRAPolicy`.
-Action encoding (``vdtn_marl.sim.link.ActionTables``): a = c·P + l for sub-channel c ∈ [0, M)
-and power level l ∈ [0, P); ``RadioParams.v2v_power_levels_dbm`` lists levels 0..P−2 (23, 15,
-5 dBm by default, level 0 the highest) and the last level P−1 is "off". Build them by name
-with :func:`vdtn_marl.algos.baselines.make_rra_baseline`, which reads :data:`RRA_BASELINES`.
+actions ``[..., L]`` of the same kind. Action encoding (``vdtn_marl.sim.link.ActionTables``):
+a = c·P + l for sub-channel c ∈ [0, M) and power level l ∈ [0, P);
+``RadioParams.v2v_power_levels_dbm`` lists levels 0..P−2 (23, 15, 5 dBm by default, level 0 the
+highest) and the last level P−1 is "off".
 
-A new RRA baseline is its class (here or in a file of its own), one line in
-:data:`RRA_BASELINES`, and ``conf/rra/<name>.yaml``; config validation, ``rra=<name>``, the
-evaluation and the tests read the registry.
+Each class builds itself for a twin's parameters with ``from_params(params, seed)``;
+:func:`~vdtn_marl.policies.registry.make_rra_baseline` builds them by name from the registry
+:data:`~vdtn_marl.policies.registry.RRA_BASELINES`.
 """
 
 from __future__ import annotations
@@ -19,7 +19,6 @@ import math
 import numpy as np
 import torch
 
-from vdtn_marl.envs.policies import RandomRRAPolicy
 from vdtn_marl.sim.layout import RRA_OBS_GAIN_SCALE_DB, RRAFeatureLayout
 from vdtn_marl.sim.params import RadioParams, TwinParams
 
@@ -58,6 +57,44 @@ def _check_links(observation, num_links: int, dim: int | None = None) -> None:
         raise ValueError(f"RRA observation has shape {shape}, expected {want}")
 
 
+class RandomRRAPolicy:
+    """Uniformly random sub-channel × power level per link and subframe: the RRA policy of the
+    environments when the user gives none.
+
+    Called with RRA observations [B, L, D] (NumPy or torch) and returns integer actions
+    [B, L] of the same kind. :meth:`seed` makes it reproducible; the environments seed it
+    from their own reset seed.
+    """
+
+    def __init__(self, num_actions: int, seed: int | None = None):
+        if num_actions < 1:
+            raise ValueError(f"num_actions={num_actions!r} must be >= 1")
+        self.num_actions = num_actions
+        self.seed(seed)
+
+    @classmethod
+    def from_params(cls, params: TwinParams, seed: int | None = None) -> RandomRRAPolicy:
+        """Uniform over the ``params.radio.num_actions`` actions, seeded with ``seed``."""
+        return cls(params.radio.num_actions, seed)
+
+    def seed(self, seed: int | None) -> None:
+        self._rng = np.random.default_rng(seed)
+        self._torch_gen: torch.Generator | None = None
+        self._seed = seed
+
+    def __call__(self, observation):
+        shape = observation.shape[:-1]
+        if isinstance(observation, np.ndarray):
+            return self._rng.integers(0, self.num_actions, size=shape)
+        if self._torch_gen is None or self._torch_gen.device != observation.device:
+            self._torch_gen = torch.Generator(device=observation.device)
+            seed = self._seed if self._seed is not None else int(self._rng.integers(2**31))
+            self._torch_gen.manual_seed(seed)
+        return torch.randint(
+            0, self.num_actions, shape, generator=self._torch_gen, device=observation.device
+        )
+
+
 class RoundRobinRRAPolicy:
     """Fixed rotating allocation: link i on sub-channel (i + t) mod M at ``power_level``.
 
@@ -86,6 +123,18 @@ class RoundRobinRRAPolicy:
         self._links = np.arange(self.num_links)
         self._links_torch: dict[torch.device, torch.Tensor] = {}
         self.reset()
+
+    @classmethod
+    def from_params(cls, params: TwinParams, seed: int | None = None) -> RoundRobinRRAPolicy:
+        """One link per follower, every sub-channel, the highest power level (``seed``
+        unused: deterministic)."""
+        radio = params.radio
+        return cls(
+            params.platoon.num_followers,
+            radio.num_subchannels,
+            radio.num_power_levels,
+            max_power_level(radio),
+        )
 
     def seed(self, seed: int | None) -> None:
         """No randomness; resets the subframe counter (API symmetry with the random policy)."""
@@ -145,6 +194,11 @@ class GreedyRRAPolicy:
         self.power_level = max_power_level(radio) if power_level is None else power_level
         _check_power_level(self.power_level, self.num_power_levels)
 
+    @classmethod
+    def from_params(cls, params: TwinParams, seed: int | None = None) -> GreedyRRAPolicy:
+        """One link per follower, the highest power level (``seed`` unused: deterministic)."""
+        return cls(params.platoon.num_followers, params.radio)
+
     def seed(self, seed: int | None) -> None:
         """Deterministic policy: nothing to seed (API symmetry)."""
 
@@ -167,33 +221,3 @@ class GreedyRRAPolicy:
         best = self.scores_db(observation).argmax(-1)
         actions = encode_rra_action(best, self.power_level, self.num_power_levels)
         return actions.astype(np.int64) if isinstance(actions, np.ndarray) else actions.long()
-
-
-# --------------------------------------------------------------------------------- registry
-
-
-def _random(params: TwinParams, seed: int | None) -> RandomRRAPolicy:
-    return RandomRRAPolicy(params.radio.num_actions, seed)
-
-
-def _round_robin(params: TwinParams, seed: int | None) -> RoundRobinRRAPolicy:
-    radio = params.radio
-    return RoundRobinRRAPolicy(
-        params.platoon.num_followers,
-        radio.num_subchannels,
-        radio.num_power_levels,
-        max_power_level(radio),
-    )
-
-
-def _greedy(params: TwinParams, seed: int | None) -> GreedyRRAPolicy:
-    return GreedyRRAPolicy(params.platoon.num_followers, params.radio)
-
-
-#: The non-learned RRA policies, name → factory ``(params, seed) -> policy`` (``seed`` seeds
-#: the random one; the others are deterministic). ``rra=<name>`` selects one.
-RRA_BASELINES = {
-    "random": _random,
-    "round_robin": _round_robin,
-    "greedy": _greedy,
-}

@@ -9,21 +9,48 @@ Per subframe every RRA agent gets κ1·s_g·g with g = Σ_m V2I rate (Mbps), sha
 - ``throughput``: only the V2I term.
 The scale factors s_g (``throughput_scale``, per Mbps) and s_ξ (``ivoi_scale``) are config
 values reported with results.
+
+:class:`RRAReward`'s fields are the one home of the rewards' defaults (the config schema reads
+them), and this module imports neither torch nor the twin: the rewards are arithmetic on the
+arrays of either backend. Which IVoI estimator a reward pays is chosen above, where the
+estimators are (:func:`vdtn_marl.envs.base.paid_ivoi_estimator`).
 """
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
 
-from vdtn_marl.envs.base import check_kappa
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim.link import SubframeOutcome
-from vdtn_marl.voi import make_ivoi_estimator
+
+if TYPE_CHECKING:
+    import torch
+
+    from vdtn_marl.sim.link import SubframeOutcome
 
 REWARD_KINDS = ("jocc", "drra", "throughput")
+KAPPA_SUM_ABS_TOL = 1e-6
+"""How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
+config validation and the environments."""
+
+
+def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
+    """κ1, κ2 ∈ [0, 1] with κ1 + κ2 = 1; κ2 defaults to 1 − κ1."""
+    for name, value in (("kappa1", kappa1), ("kappa2", kappa2)):
+        if name == "kappa2" and value is None:
+            kappa2 = value = 1.0 - kappa1
+        if not isinstance(value, numbers.Real) or isinstance(value, bool):
+            raise ConfigError(f"{name}={value!r} must be a number in [0, 1]")
+        if not 0.0 <= value <= 1.0:
+            raise ConfigError(f"{name}={value!r} is outside the allowed range [0, 1]")
+    if abs(kappa1 + kappa2 - 1.0) > KAPPA_SUM_ABS_TOL:
+        raise ConfigError(
+            f"kappa1 + kappa2 = {kappa1 + kappa2!r} must equal 1 (kappa1={kappa1}, kappa2={kappa2})"
+        )
+    return float(kappa1), float(kappa2)
 
 
 @dataclass(frozen=True)
@@ -55,14 +82,20 @@ class RRAReward:
         return outcome.v2i_rate_bps.sum(axis=-1) * 1e-6
 
     def per_subframe(self, outcome: SubframeOutcome, bandwidth_hz: float, subframe_s: float):
-        """Reward of every RRA agent for this subframe [B, L], and g (Mbps) [B]."""
-        xp = np if isinstance(outcome.v2v_bits, np.ndarray) else torch
+        """Reward of every RRA agent for this subframe [B, L], and g (Mbps) [B], on the
+        outcome's backend (NumPy arrays or torch tensors)."""
+        bits = outcome.v2v_bits
+        numpy = isinstance(bits, np.ndarray)
         g = self.v2i_throughput_mbps(outcome)
-        reward = (self.kappa1 * self.throughput_scale) * g[:, None] * xp.ones_like(outcome.v2v_bits)
+        ones = np.ones_like(bits) if numpy else bits.new_ones(bits.shape)
+        reward = (self.kappa1 * self.throughput_scale) * g[:, None] * ones
         if self.kind == "drra":
-            efficiency = outcome.v2v_bits / (bandwidth_hz * subframe_s)
+            efficiency = bits / (bandwidth_hz * subframe_s)
             done = outcome.delivered_now | ~outcome.was_pending
-            progress = xp.where(done, 1.0, efficiency / 10.0)
+            if numpy:
+                progress = np.where(done, 1.0, efficiency / 10.0)
+            else:
+                progress = (efficiency / 10.0).masked_fill(done, 1.0)
             reward = reward + self.kappa2 * progress
         return reward, g
 
@@ -72,12 +105,4 @@ class RRAReward:
             return self.kappa2 * self.ivoi_scale * ivoi
         if self.kind == "drra":
             return -self.kappa2 * self.miss_penalty * cam_lost.float()
-        return torch.zeros_like(ivoi)
-
-
-def paid_ivoi_estimator(reward_fn: RRAReward, ivoi_estimator, horizon_intervals: int):
-    """The IVoI estimator whose ξ ``reward_fn`` pays: ``ivoi_estimator`` (a name of
-    :data:`~vdtn_marl.voi.IVOI_ESTIMATORS`, ``"none"`` or an object; ``"rollout"`` over
-    ``horizon_intervals``) when the reward uses ξ, else ξ = 0 (nothing is estimated)."""
-    options = {"horizon_intervals": horizon_intervals} if ivoi_estimator == "rollout" else {}
-    return make_ivoi_estimator(ivoi_estimator if reward_fn.uses_ivoi else "none", **options)
+        return ivoi.new_zeros(ivoi.shape)
