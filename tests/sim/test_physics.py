@@ -101,8 +101,8 @@ def test_noise_power_override_reaches_the_kernel():
     assert RADIO.noise_power_override_dbm is None
     for backend in ("torch", "numpy"):
         twin = DigitalTwin(params, seed=0, backend=backend)
-        assert twin._const_torch.noise_mw == pytest.approx(1e-9, rel=1e-12)
-        thermal = DigitalTwin(seed=0, backend=backend)._const_torch.noise_mw
+        assert twin._const.noise_mw == pytest.approx(1e-9, rel=1e-12)
+        thermal = DigitalTwin(seed=0, backend=backend)._const.noise_mw
         assert thermal == pytest.approx(10 ** (-12.1447), rel=1e-4)
 
 

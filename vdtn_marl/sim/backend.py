@@ -13,6 +13,7 @@ Random draws always come from the twin's torch generator.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
 from typing import TypeAlias
@@ -169,9 +170,11 @@ _DTYPES = {
 
 
 class ArrayNamespace:
-    """The array type a twin keeps its state in: NumPy arrays (``numpy=True``, CPU) or torch
+    """The array type a twin holds its state in: NumPy arrays (``numpy=True``, CPU) or torch
     tensors on ``device``. Arrays are made, converted and masked here, so the twin's code runs
-    without a branch per backend; conversions to and from torch are views (no copy)."""
+    without a branch per backend. :meth:`to_torch` and :meth:`from_torch` are the edges between
+    the state and torch callers; on the NumPy backend they are views (no copy), on the torch
+    backend they hand the arrays through."""
 
     def __init__(self, numpy: bool, device: torch.device):
         self.numpy = numpy
@@ -182,6 +185,11 @@ class ArrayNamespace:
         """The array module: ``numpy`` or ``torch`` (a property: deep copies of a twin do not
         copy modules)."""
         return np if self.numpy else torch
+
+    @property
+    def array_device(self) -> torch.device | None:
+        """The ``device`` argument of the sim's array constructors: None for NumPy arrays."""
+        return None if self.numpy else self.device
 
     def _dtype(self, name: str):
         return _DTYPES[name][0 if self.numpy else 1]
@@ -201,20 +209,19 @@ class ArrayNamespace:
             return np.empty(shape, self._dtype(dtype))
         return torch.empty(shape, dtype=self._dtype(dtype), device=self.device)
 
-    def native(self, x) -> Array:
-        """A torch tensor (or array) in this namespace: a NumPy view on the NumPy backend."""
-        return to_numpy(x) if self.numpy else x
+    def from_torch(self, x):
+        """A torch tensor, or a dataclass of them, in this namespace (NumPy views of CPU
+        tensors on the NumPy backend; tensors pass through on the torch backend)."""
+        return _map_arrays(to_numpy, x) if self.numpy else x
 
-    def public(self, x) -> torch.Tensor:
-        """An array of this namespace as a torch tensor (sharing a NumPy array's memory)."""
-        return to_torch(x) if self.numpy else x
+    def to_torch(self, x):
+        """An array of this namespace, or a dataclass of them, as torch tensors (sharing a
+        NumPy array's memory: in-place writes reach the array)."""
+        return _map_arrays(to_torch, x) if self.numpy else x
 
-    def copy(self, x: Array) -> Array:
-        return x.copy() if self.numpy else x.clone()
-
-    def mask(self, mask: torch.Tensor) -> Array:
-        """A bool mask given as a torch tensor, in this namespace (on the twin's device)."""
-        return mask.cpu().numpy() if self.numpy else mask.to(self.device)
+    def asarray(self, x) -> Array:
+        """An input (torch tensor or NumPy array) in this namespace, its dtype kept."""
+        return to_numpy(x) if self.numpy else torch.as_tensor(x, device=self.device)
 
     def float32(self, x) -> Array:
         """An input (torch tensor or array) as float32 in this namespace."""
@@ -222,7 +229,48 @@ class ArrayNamespace:
             return to_numpy(x).astype(np.float32, copy=False)
         return torch.as_tensor(x).to(device=self.device, dtype=torch.float32)
 
+    def mask(self, mask: torch.Tensor) -> Array:
+        """A bool mask given as a torch tensor, in this namespace (on the twin's device)."""
+        return mask.cpu().numpy() if self.numpy else mask.to(self.device)
+
+    def copy(self, x: Array) -> Array:
+        return x.copy() if self.numpy else x.clone()
+
+    def where(self, condition: Array, x, y) -> Array:
+        return np.where(condition, x, y) if self.numpy else torch.where(condition, x, y)
+
+    def take_along_axis(self, x: Array, indices: Array, axis: int) -> Array:
+        """Entries of ``x`` at ``indices`` along ``axis``; the other axes broadcast."""
+        if self.numpy:
+            return np.take_along_axis(x, indices, axis)
+        return torch.take_along_dim(x, indices, axis)
+
+    def is_integer(self, x: Array) -> bool:
+        """Whether ``x`` holds integers (NumPy: a signed or unsigned int dtype; torch: any
+        dtype that is not floating point)."""
+        if self.numpy:
+            return x.dtype.kind in "iu"
+        return not x.dtype.is_floating_point
+
     def own_threads(self):
         """Context of the twin's own torch calls: one intra-op thread on the NumPy backend
         (:func:`single_intra_op_thread`)."""
         return single_intra_op_thread() if self.numpy else nullcontext()
+
+
+def like(x: Array, reference: Array) -> Array:
+    """``x`` in the array type of ``reference`` (a NumPy array or a torch tensor, views where
+    it can)."""
+    return to_numpy(x) if isinstance(reference, np.ndarray) else to_torch(x)
+
+
+def _map_arrays(convert, x):
+    """``convert`` applied to an array, or to each array field of a dataclass."""
+    if not dataclasses.is_dataclass(x):
+        return convert(x)
+    changed = {
+        f.name: convert(value)
+        for f in dataclasses.fields(x)
+        if isinstance(value := getattr(x, f.name), torch.Tensor | np.ndarray)
+    }
+    return dataclasses.replace(x, **changed)
