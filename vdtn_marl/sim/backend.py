@@ -16,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
+from functools import lru_cache
 from typing import TypeAlias
 
 import numpy as np
@@ -212,12 +213,16 @@ class ArrayNamespace:
     def from_torch(self, x):
         """A torch tensor, or a dataclass of them, in this namespace (NumPy views of CPU
         tensors on the NumPy backend; tensors pass through on the torch backend)."""
-        return _map_arrays(to_numpy, x) if self.numpy else x
+        if not self.numpy:
+            return x
+        return to_numpy(x) if isinstance(x, torch.Tensor) else _map_arrays(to_numpy, x)
 
     def to_torch(self, x):
         """An array of this namespace, or a dataclass of them, as torch tensors (sharing a
         NumPy array's memory: in-place writes reach the array)."""
-        return _map_arrays(to_torch, x) if self.numpy else x
+        if not self.numpy:
+            return x
+        return to_torch(x) if isinstance(x, np.ndarray) else _map_arrays(to_torch, x)
 
     def asarray(self, x) -> Array:
         """An input (torch tensor or NumPy array) in this namespace, its dtype kept."""
@@ -240,10 +245,16 @@ class ArrayNamespace:
         return np.where(condition, x, y) if self.numpy else torch.where(condition, x, y)
 
     def take_along_axis(self, x: Array, indices: Array, axis: int) -> Array:
-        """Entries of ``x`` at ``indices`` along ``axis``; the other axes broadcast."""
+        """Entries of ``x`` at ``indices`` along ``axis`` (``np.take_along_axis``); the other
+        axes of ``indices`` broadcast to those of ``x`` (as fancy indexing on NumPy and a
+        gather on torch, the faster form of each)."""
         if self.numpy:
-            return np.take_along_axis(x, indices, axis)
-        return torch.take_along_dim(x, indices, axis)
+            index = list(_index_grid(x.shape))
+            index[axis] = indices
+            return x[tuple(index)]
+        shape = list(x.shape)
+        shape[axis] = indices.shape[axis]
+        return x.gather(axis, indices.expand(shape))
 
     def is_integer(self, x: Array) -> bool:
         """Whether ``x`` holds integers (NumPy: a signed or unsigned int dtype; torch: any
@@ -264,13 +275,24 @@ def like(x: Array, reference: Array) -> Array:
     return to_numpy(x) if isinstance(reference, np.ndarray) else to_torch(x)
 
 
+@lru_cache(maxsize=64)
+def _index_grid(shape: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+    """The open grid of a NumPy array of ``shape``: ``arange(shape[i])`` along axis i."""
+    ndim = len(shape)
+    return tuple(
+        np.arange(n).reshape([-1 if j == i else 1 for j in range(ndim)])
+        for i, n in enumerate(shape)
+    )
+
+
 def _map_arrays(convert, x):
-    """``convert`` applied to an array, or to each array field of a dataclass."""
+    """``convert`` applied to an array, or to each array field of a dataclass (a new one)."""
     if not dataclasses.is_dataclass(x):
         return convert(x)
-    changed = {
-        f.name: convert(value)
-        for f in dataclasses.fields(x)
-        if isinstance(value := getattr(x, f.name), torch.Tensor | np.ndarray)
-    }
-    return dataclasses.replace(x, **changed)
+    values = {f.name: getattr(x, f.name) for f in dataclasses.fields(x)}
+    return type(x)(
+        **{
+            name: convert(value) if isinstance(value, torch.Tensor | np.ndarray) else value
+            for name, value in values.items()
+        }
+    )
