@@ -71,7 +71,9 @@ from vdtn_marl.sim.platoon import (
 
 @dataclass
 class IntervalRecord:
-    """Everything that happened in one control interval, per scenario (torch tensors).
+    """Everything that happened in one control interval, per scenario (torch tensors;
+    ``state_after`` shares its memory with the twin's state on either backend: copy it before
+    changing it).
 
     ``state_before``/``state_after`` are the perfect states S_k and S_{k+1}; ``interval`` [B]
     is k. ``switch_subframe`` [B, F] is when u_k took force. ``cam_delay_subframes`` [B, L]
