@@ -257,11 +257,18 @@ class ArrayNamespace:
         return x.gather(axis, indices.expand(shape))
 
     def is_integer(self, x: Array) -> bool:
-        """Whether ``x`` holds integers (NumPy: a signed or unsigned int dtype; torch: any
-        dtype that is not floating point)."""
+        """Whether ``x`` holds integers (a signed or unsigned int dtype; not bool)."""
         if self.numpy:
             return x.dtype.kind in "iu"
-        return not x.dtype.is_floating_point
+        dtype = x.dtype
+        return not (dtype.is_floating_point or dtype.is_complex or dtype == torch.bool)
+
+    def value_range(self, x: Array) -> tuple:
+        """(min, max) of a non-empty ``x`` as scalars that compare with Python numbers (on
+        torch one reduction and one device sync)."""
+        if self.numpy:
+            return x.min(), x.max()
+        return tuple(torch.stack(torch.aminmax(x)).tolist())
 
     def own_threads(self):
         """Context of the twin's own torch calls: one intra-op thread on the NumPy backend

@@ -514,7 +514,11 @@ class DigitalTwin:
         if tuple(actions.shape) != expected:
             raise ValueError(f"RRA actions have shape {tuple(actions.shape)}, expected {expected}")
         n_act = self.params.radio.num_actions
-        if not self.ns.is_integer(actions) or actions.min() < 0 or actions.max() >= n_act:
+        bad = not self.ns.is_integer(actions)
+        if not bad:
+            low, high = self.ns.value_range(actions)
+            bad = low < 0 or high >= n_act
+        if bad:
             count = math.prod(expected)
             shown = actions.tolist() if count <= 16 else f"array of {count}"
             raise ValueError(
