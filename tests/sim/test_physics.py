@@ -101,8 +101,8 @@ def test_noise_power_override_reaches_the_kernel():
     assert RADIO.noise_power_override_dbm is None
     for backend in ("torch", "numpy"):
         twin = DigitalTwin(params, seed=0, backend=backend)
-        assert twin._const_torch.noise_mw == pytest.approx(1e-9, rel=1e-12)
-        thermal = DigitalTwin(seed=0, backend=backend)._const_torch.noise_mw
+        assert twin._const.noise_mw == pytest.approx(1e-9, rel=1e-12)
+        thermal = DigitalTwin(seed=0, backend=backend)._const.noise_mw
         assert thermal == pytest.approx(10 ** (-12.1447), rel=1e-4)
 
 
@@ -365,14 +365,23 @@ def test_bad_model_parameters_name_key_and_range(override, fragment):
         TwinParams.from_overrides(**override)
 
 
-def test_bad_rra_actions_raise_with_range():
-    twin = DigitalTwin(seed=0)
+@pytest.mark.parametrize("backend", ["torch", "numpy"])
+def test_bad_rra_actions_raise_with_range(backend):
+    twin = DigitalTwin(seed=0, backend=backend)
+
+    def step(actions):
+        twin.step_subframe(twin.ns.from_torch(torch.tensor(actions)))
+
     with pytest.raises(ValueError, match=r"\[0, 15\]"):
-        twin.step_subframe(torch.tensor([[0, 16, 1]]))
+        step([[0, 16, 1]])
+    with pytest.raises(ValueError, match=r"\[0, 15\]"):
+        step([[0, -1, 1]])
     with pytest.raises(ValueError, match="shape"):
-        twin.step_subframe(torch.tensor([[0, 1]]))
+        step([[0, 1]])
     with pytest.raises(ValueError, match="integers"):
-        twin.step_subframe(torch.tensor([[0.5, 1.0, 2.0]]))
+        step([[0.5, 1.0, 2.0]])
+    with pytest.raises(ValueError, match="integers"):
+        step([[False, True, False]])
 
 
 def test_masked_subframe_advances_only_masked_scenarios():

@@ -13,8 +13,10 @@ Random draws always come from the twin's torch generator.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
+from functools import lru_cache
 from typing import TypeAlias
 
 import numpy as np
@@ -169,9 +171,11 @@ _DTYPES = {
 
 
 class ArrayNamespace:
-    """The array type a twin keeps its state in: NumPy arrays (``numpy=True``, CPU) or torch
+    """The array type a twin holds its state in: NumPy arrays (``numpy=True``, CPU) or torch
     tensors on ``device``. Arrays are made, converted and masked here, so the twin's code runs
-    without a branch per backend; conversions to and from torch are views (no copy)."""
+    without a branch per backend. :meth:`to_torch` and :meth:`from_torch` are the edges between
+    the state and torch callers; on the NumPy backend they are views (no copy), on the torch
+    backend they hand the arrays through."""
 
     def __init__(self, numpy: bool, device: torch.device):
         self.numpy = numpy
@@ -182,6 +186,11 @@ class ArrayNamespace:
         """The array module: ``numpy`` or ``torch`` (a property: deep copies of a twin do not
         copy modules)."""
         return np if self.numpy else torch
+
+    @property
+    def array_device(self) -> torch.device | None:
+        """The ``device`` argument of the sim's array constructors: None for NumPy arrays."""
+        return None if self.numpy else self.device
 
     def _dtype(self, name: str):
         return _DTYPES[name][0 if self.numpy else 1]
@@ -201,20 +210,23 @@ class ArrayNamespace:
             return np.empty(shape, self._dtype(dtype))
         return torch.empty(shape, dtype=self._dtype(dtype), device=self.device)
 
-    def native(self, x) -> Array:
-        """A torch tensor (or array) in this namespace: a NumPy view on the NumPy backend."""
-        return to_numpy(x) if self.numpy else x
+    def from_torch(self, x):
+        """A torch tensor, or a dataclass of them, in this namespace (NumPy views of CPU
+        tensors on the NumPy backend; tensors pass through on the torch backend)."""
+        if not self.numpy:
+            return x
+        return to_numpy(x) if isinstance(x, torch.Tensor) else _map_arrays(to_numpy, x)
 
-    def public(self, x) -> torch.Tensor:
-        """An array of this namespace as a torch tensor (sharing a NumPy array's memory)."""
-        return to_torch(x) if self.numpy else x
+    def to_torch(self, x):
+        """An array of this namespace, or a dataclass of them, as torch tensors (sharing a
+        NumPy array's memory: in-place writes reach the array)."""
+        if not self.numpy:
+            return x
+        return to_torch(x) if isinstance(x, np.ndarray) else _map_arrays(to_torch, x)
 
-    def copy(self, x: Array) -> Array:
-        return x.copy() if self.numpy else x.clone()
-
-    def mask(self, mask: torch.Tensor) -> Array:
-        """A bool mask given as a torch tensor, in this namespace (on the twin's device)."""
-        return mask.cpu().numpy() if self.numpy else mask.to(self.device)
+    def asarray(self, x) -> Array:
+        """An input (torch tensor or NumPy array) in this namespace, its dtype kept."""
+        return to_numpy(x) if self.numpy else torch.as_tensor(x, device=self.device)
 
     def float32(self, x) -> Array:
         """An input (torch tensor or array) as float32 in this namespace."""
@@ -222,7 +234,72 @@ class ArrayNamespace:
             return to_numpy(x).astype(np.float32, copy=False)
         return torch.as_tensor(x).to(device=self.device, dtype=torch.float32)
 
+    def mask(self, mask: torch.Tensor) -> Array:
+        """A bool mask given as a torch tensor, in this namespace (on the twin's device)."""
+        return mask.cpu().numpy() if self.numpy else mask.to(self.device)
+
+    def copy(self, x: Array) -> Array:
+        return x.copy() if self.numpy else x.clone()
+
+    def where(self, condition: Array, x, y) -> Array:
+        return np.where(condition, x, y) if self.numpy else torch.where(condition, x, y)
+
+    def take_along_axis(self, x: Array, indices: Array, axis: int) -> Array:
+        """Entries of ``x`` at ``indices`` along ``axis`` (``np.take_along_axis``); the other
+        axes of ``indices`` broadcast to those of ``x`` (as fancy indexing on NumPy and a
+        gather on torch, the faster form of each)."""
+        if self.numpy:
+            index = list(_index_grid(x.shape))
+            index[axis] = indices
+            return x[tuple(index)]
+        shape = list(x.shape)
+        shape[axis] = indices.shape[axis]
+        return x.gather(axis, indices.expand(shape))
+
+    def is_integer(self, x: Array) -> bool:
+        """Whether ``x`` holds integers (a signed or unsigned int dtype; not bool)."""
+        if self.numpy:
+            return x.dtype.kind in "iu"
+        dtype = x.dtype
+        return not (dtype.is_floating_point or dtype.is_complex or dtype == torch.bool)
+
+    def value_range(self, x: Array) -> tuple:
+        """(min, max) of a non-empty ``x`` as scalars that compare with Python numbers (on
+        torch one reduction and one device sync)."""
+        if self.numpy:
+            return x.min(), x.max()
+        return tuple(torch.stack(torch.aminmax(x)).tolist())
+
     def own_threads(self):
         """Context of the twin's own torch calls: one intra-op thread on the NumPy backend
         (:func:`single_intra_op_thread`)."""
         return single_intra_op_thread() if self.numpy else nullcontext()
+
+
+def like(x: Array, reference: Array) -> Array:
+    """``x`` in the array type of ``reference`` (a NumPy array or a torch tensor, views where
+    it can)."""
+    return to_numpy(x) if isinstance(reference, np.ndarray) else to_torch(x)
+
+
+@lru_cache(maxsize=64)
+def _index_grid(shape: tuple[int, ...]) -> tuple[np.ndarray, ...]:
+    """The open grid of a NumPy array of ``shape``: ``arange(shape[i])`` along axis i."""
+    ndim = len(shape)
+    return tuple(
+        np.arange(n).reshape([-1 if j == i else 1 for j in range(ndim)])
+        for i, n in enumerate(shape)
+    )
+
+
+def _map_arrays(convert, x):
+    """``convert`` applied to an array, or to each array field of a dataclass (a new one)."""
+    if not dataclasses.is_dataclass(x):
+        return convert(x)
+    values = {f.name: getattr(x, f.name) for f in dataclasses.fields(x)}
+    return type(x)(
+        **{
+            name: convert(value) if isinstance(value, torch.Tensor | np.ndarray) else value
+            for name, value in values.items()
+        }
+    )

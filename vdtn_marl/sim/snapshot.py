@@ -77,7 +77,10 @@ def import_state(obj: Any, state: dict[str, Any]) -> None:
     for key, saved in state.items():
         current = getattr(obj, key, None)
         restored = _import(current, saved)
-        if restored is not current or not hasattr(obj, key):
+        # an attribute behind a descriptor (the twin's torch views of its arrays) may hand out
+        # a new object on each read: write it back even when it was restored in place
+        descriptor = hasattr(type(getattr(type(obj), key, None)), "__set__")
+        if restored is not current or descriptor or not hasattr(obj, key):
             setattr(obj, key, restored)
 
 

@@ -19,23 +19,26 @@ drives its own window of the trace set: ``leader_speed_mps`` is [B, Λ, K].
 The twin knows nothing of RL APIs. Every random number comes from one seeded
 ``torch.Generator`` on the twin's device.
 
-With ``backend="numpy"`` (CPU; the single-scenario path of the PettingZoo environments) the
-per-subframe kernel and the per-interval work (channel update, tables, observations, platoon
-integration) run on NumPy views of the twin's state, with the same float32 operations in the
-same order as the torch path and the same draws from the same torch generator, so both
-backends give the same numbers (:mod:`vdtn_marl.sim.backend`); a torch call per NumPy operation
-would cost several times more at B = 1. Public state attributes and return values stay torch
-tensors (CPU tensors sharing memory with those arrays); the interval tables, the link state and
-the RRA observation are NumPy arrays on this backend. ``twin.ns``
-(:class:`~vdtn_marl.sim.backend.ArrayNamespace`) makes, converts and masks the arrays of the
-twin's backend, so the twin's code has few backend branches. The twin's own torch calls
-(draws, a few transcendental functions) run on one intra-op thread there, see
+The twin holds its state once, in the arrays of its backend (``twin.ns``, an
+:class:`~vdtn_marl.sim.backend.ArrayNamespace`): NumPy arrays with ``backend="numpy"`` (CPU; the
+single-scenario path of the PettingZoo environments, where a torch call per operation would
+cost several times more at B = 1), torch tensors on the twin's device otherwise. The same code,
+with the same float32 operations in the same order, runs on either, and the draws come from the
+same torch generator, so both backends give the same numbers (:mod:`vdtn_marl.sim.backend`).
+Torch is the edge: the public state attributes (``platoon``, ``interval``, ``cam_held``, …),
+:meth:`~DigitalTwin.vehicle_observation`, :meth:`~DigitalTwin.switch_subframe` and the
+:class:`IntervalRecord` are torch tensors (on the NumPy backend, CPU tensors sharing the arrays'
+memory; assigning a tensor to a state attribute stores it as the backend's array). The
+per-subframe interface (actions, :meth:`~DigitalTwin.rra_observation`, the subframe outcome,
+``link_state`` and ``tables``) is in the backend's arrays. The twin's own torch calls on the
+NumPy backend (draws, a few transcendental functions) run on one intra-op thread, see
 :func:`~vdtn_marl.sim.backend.single_intra_op_thread`.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -44,16 +47,7 @@ import torch
 from vdtn_marl.data.traces import TraceSource, get_trace_source
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.sim import channel, link
-from vdtn_marl.sim.backend import (
-    ArrayNamespace,
-    as_float,
-    cat,
-    clamp,
-    mean_axis,
-    stack,
-    to_numpy,
-    xp,
-)
+from vdtn_marl.sim.backend import ArrayNamespace, as_float, cat, clamp, like, mean_axis, stack
 from vdtn_marl.sim.layout import (
     RRA_CAM_AGE_CLIP_INTERVALS,
     RRA_COMMAND_HISTORY,
@@ -77,7 +71,9 @@ from vdtn_marl.sim.platoon import (
 
 @dataclass
 class IntervalRecord:
-    """Everything that happened in one control interval, per scenario (torch tensors).
+    """Everything that happened in one control interval, per scenario (torch tensors;
+    ``state_after`` shares its memory with the twin's state on either backend: copy it before
+    changing it).
 
     ``state_before``/``state_after`` are the perfect states S_k and S_{k+1}; ``interval`` [B]
     is k. ``switch_subframe`` [B, F] is when u_k took force. ``cam_delay_subframes`` [B, L]
@@ -133,8 +129,31 @@ def resolve_device(device: str | torch.device) -> torch.device:
     return dev
 
 
+class _TorchState:
+    """A public state attribute of :class:`DigitalTwin`, read and assigned as torch tensors.
+
+    The twin holds the state once, as ``_<name>`` in its own namespace (``twin.ns``); reading
+    gives torch tensors (on the NumPy backend, tensors sharing the arrays' memory, so in-place
+    writes reach the state), assigning stores the backend's arrays.
+    """
+
+    def __init__(self, doc: str):
+        self.__doc__ = doc
+
+    def __set_name__(self, owner, name: str) -> None:
+        self.held = "_" + name
+
+    def __get__(self, twin, owner=None):
+        if twin is None:
+            return self
+        return twin.ns.to_torch(getattr(twin, self.held))
+
+    def __set__(self, twin, value) -> None:
+        setattr(twin, self.held, twin.ns.from_torch(value))
+
+
 class DigitalTwin:
-    """B scenarios of the VDTN platoon model, batched in torch.
+    """B scenarios of the VDTN platoon model, batched in torch or NumPy.
 
     Args:
         params: model parameters (defaults: the case study).
@@ -144,11 +163,27 @@ class DigitalTwin:
         trace_source: leader trace set, by name or instance (default ``params.traces``).
         radio: simulate the radio (False for the perfect-observation control env: faster,
             and CAMs are then exact and instantaneous).
-        backend: ``"torch"`` or ``"numpy"``; ``"numpy"`` runs the per-subframe kernel and the
-            per-interval work on NumPy arrays (CPU, single-scenario fast path, same numbers).
-            Draws stay in torch.
+        backend: ``"torch"`` or ``"numpy"``; ``"numpy"`` holds the state in NumPy arrays and
+            runs the per-subframe kernel and the per-interval work on them (CPU,
+            single-scenario fast path, same numbers). Draws stay in torch.
         lookahead_intervals: extra leader trace beyond the episode, for VoI rollouts.
     """
+
+    # the state, held in the backend's arrays as ``_<name>``; torch tensors to callers
+    leader_speed_mps = _TorchState("Every leader's speed trace (m/s), [B, Λ, K].")
+    platoon = _TorchState("The perfect platoon state S_k (:class:`PlatoonState`, [B, N] each).")
+    interval = _TorchState("The current control interval k, [B] int64.")
+    v2v_shadow_db = _TorchState("V2V shadowing (dB), [B, N, N], symmetric.")
+    v2i_shadow_db = _TorchState("V2I shadowing (dB), [B, N].")
+    bs_offset_m = _TorchState("Along-road offset of the base-station grid (m), [B].")
+    shadow_position_m = _TorchState("Positions at the last shadowing update (m), [B, N].")
+    cam_snapshot = _TorchState("CAM_k: the predecessor's (accel, command), [B, F, 2].")
+    cam_held = _TorchState("The last delivered CAM content of each follower, [B, F, 2].")
+    cam_held_interval = _TorchState("Interval of the held CAM (−1: none yet), [B, F] int64.")
+    cam_delay_history = _TorchState(
+        "Each link's last CAM delivery subframes as fractions of T + 1, newest first, [B, L, H]."
+    )
+    command_history = _TorchState("Each follower's last commands (m/s²), newest first, [B, F, H].")
 
     def __init__(
         self,
@@ -181,6 +216,8 @@ class DigitalTwin:
         self.lookahead_intervals = lookahead_intervals
         self.trace_source = get_trace_source(trace_source or self.params.traces)
         self.generator = torch.Generator(device=self.device)
+        #: the array type of the twin's state (NumPy arrays or torch tensors on the device)
+        self.ns = ns = ArrayNamespace(backend == "numpy", self.device)
 
         pp, rp = self.params.platoon, self.params.radio
         #: who leads, who follows whom, links, V2I users, lanes (docs/model.md §6)
@@ -196,22 +233,20 @@ class DigitalTwin:
         self.rra_obs_dim = self.rra_layout.dim
         self.integrator = IntervalIntegrator(pp, self.device)
         t = pp.subframes_per_interval  # fraction of the interval left at each subframe, [T]
-        self._time_left = 1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
-        #: the array type of the twin's state (NumPy arrays or torch tensors on the device)
-        self.ns = ns = ArrayNamespace(backend == "numpy", self.device)
-        self._numpy = ns.numpy
-        self._time_left = ns.native(self._time_left)
+        self._time_left = ns.from_torch(
+            1.0 - torch.arange(t, device=self.device, dtype=torch.float32) / t
+        )
         # lane centres across the road [N] (m), None for one lane (docs/model.md §6)
         self._lateral_offset_m = None
         if not topology.single_lane:
             offsets = torch.tensor(topology.lateral_offset_m, device=self.device)
-            self._lateral_offset_m = ns.native(offsets)
-        self._decode_torch = link.ActionTables.build(rp, self.device)
-        self._const_torch = link.KernelConstants.build(
-            rp, pp.subframe_s, self.batch_size, self.num_links, self.device
+            self._lateral_offset_m = ns.from_torch(offsets)
+        self._decode = ns.from_torch(link.ActionTables.build(rp, self.device))
+        self._const = ns.from_torch(
+            link.KernelConstants.build(
+                rp, pp.subframe_s, self.batch_size, self.num_links, self.device
+            )
         )
-        self._decode = self._decode_torch.numpy() if ns.numpy else self._decode_torch
-        self._const = self._const_torch.numpy() if ns.numpy else self._const_torch
         self.seed(seed)
         self.reset()
 
@@ -238,7 +273,7 @@ class DigitalTwin:
         if seed is not None:
             self.seed(seed)
         b, pp, rp = self.batch_size, self.params.platoon, self.params.radio
-        dev = self.device
+        dev, ns = self.device, self.ns
         num_points = self.params.episode_intervals + 1 + self.lookahead_intervals
         count = b if mask is None else int(mask.sum())
         if count == 0:
@@ -254,67 +289,56 @@ class DigitalTwin:
                 f"trace source {self.trace_source.info.name!r} returned "
                 "non-finite or negative speeds"
             )
-        state = initial_state(traces[..., 0], pp, self.generator)
+        # the draws in torch, in a fixed order, then into the backend's arrays
+        state = ns.from_torch(initial_state(traces[..., 0], pp, self.generator))
         v2v_shadow = rp.v2v_shadow_std_db * channel.symmetric_normal(
-            (count, pp.num_vehicles, pp.num_vehicles), self.generator
+            (count, pp.num_vehicles, pp.num_vehicles), self.generator, numpy=ns.numpy
         )
-        v2i_shadow = rp.v2i_shadow_std_db * torch.randn(
-            count, pp.num_vehicles, generator=self.generator, device=dev
+        v2i_shadow = rp.v2i_shadow_std_db * ns.from_torch(
+            torch.randn(count, pp.num_vehicles, generator=self.generator, device=dev)
         )
-        bs_offset = rp.inter_site_distance_m * torch.rand(
-            count, generator=self.generator, device=dev
+        bs_offset = rp.inter_site_distance_m * ns.from_torch(
+            torch.rand(count, generator=self.generator, device=dev)
         )
+        traces = ns.from_torch(traces)
         cam_held = cam_snapshot(state, pp)
         if mask is None:
-            self.leader_speed_mps = traces
-            self.platoon = state
-            self.v2v_shadow_db, self.v2i_shadow_db = v2v_shadow, v2i_shadow
-            self.bs_offset_m = bs_offset
-            self.shadow_position_m = state.position_m.clone()
-            self.interval = torch.zeros(b, dtype=torch.long, device=dev)
-            self.cam_held = cam_held
-            self.cam_held_interval = torch.full((b, self.num_followers), -1, device=dev)
-            self.cam_delay_history = torch.zeros(b, self.num_links, RRA_DELAY_HISTORY, device=dev)
-            self.command_history = torch.zeros(
-                b, self.num_followers, RRA_COMMAND_HISTORY, device=dev
-            )
+            self._leader_speed_mps = traces
+            self._platoon = state
+            self._v2v_shadow_db, self._v2i_shadow_db = v2v_shadow, v2i_shadow
+            self._bs_offset_m = bs_offset
+            self._shadow_position_m = ns.copy(state.position_m)
+            self._interval = ns.zeros((b,), "int64")
+            self._cam_held = cam_held
+            self._cam_held_interval = ns.full((b, self.num_followers), -1, "int64")
+            self._cam_delay_history = ns.zeros((b, self.num_links, RRA_DELAY_HISTORY))
+            self._command_history = ns.zeros((b, self.num_followers, RRA_COMMAND_HISTORY))
             self.begin_interval()
             return
-        idx = mask.nonzero().squeeze(-1)
-        self.leader_speed_mps[idx] = traces
-        self.platoon = PlatoonState(
+        rows = ns.mask(mask)
+        self._leader_speed_mps[rows] = traces
+        # a new state, not written in place: records of earlier intervals share its arrays
+        self._platoon = PlatoonState(
             *(
-                self._scatter(getattr(self.platoon, k), idx, getattr(state, k))
-                for k in ("position_m", "speed_mps", "accel_mps2", "command_mps2")
+                self._scatter(getattr(self._platoon, f.name), rows, getattr(state, f.name))
+                for f in dataclasses.fields(state)
             )
         )
-        self.v2v_shadow_db[idx] = v2v_shadow
-        self.v2i_shadow_db[idx] = v2i_shadow
-        self.bs_offset_m[idx] = bs_offset
-        self.shadow_position_m[idx] = state.position_m
-        self.interval[idx] = 0
-        self.cam_held[idx] = cam_held
-        self.cam_held_interval[idx] = -1
-        self.cam_delay_history[idx] = 0.0
-        self.command_history[idx] = 0.0
+        self._v2v_shadow_db[rows] = v2v_shadow
+        self._v2i_shadow_db[rows] = v2i_shadow
+        self._bs_offset_m[rows] = bs_offset
+        self._shadow_position_m[rows] = state.position_m
+        self._interval[rows] = 0
+        self._cam_held[rows] = cam_held
+        self._cam_held_interval[rows] = -1
+        self._cam_delay_history[rows] = 0.0
+        self._command_history[rows] = 0.0
         self.begin_interval(mask)
 
-    @staticmethod
-    def _scatter(base: torch.Tensor, idx: torch.Tensor, values: torch.Tensor) -> torch.Tensor:
-        out = base.clone()
-        out[idx] = values
+    def _scatter(self, base, rows, values):
+        out = self.ns.copy(base)
+        out[rows] = values
         return out
-
-    def _native(self, x):
-        """A state tensor in the backend's array type (a NumPy view on the NumPy backend)."""
-        return self.ns.native(x)
-
-    def _public(self, x) -> torch.Tensor:
-        """A backend array as a torch tensor (shares the NumPy array's memory)."""
-        return self.ns.public(x)
-
-    def _native_platoon(self) -> PlatoonState:
-        return self.platoon.numpy() if self._numpy else self.platoon
 
     # ------------------------------------------------------------------ interval start
     def begin_interval(self, mask: torch.Tensor | None = None) -> None:
@@ -327,34 +351,43 @@ class DigitalTwin:
             self._begin_interval(mask)
 
     def _begin_interval(self, mask: torch.Tensor | None) -> None:
-        snapshot = self._public(cam_snapshot(self._native_platoon(), self.params.platoon))
-        self.cam_snapshot = (
-            snapshot
-            if mask is None
-            else torch.where(mask[:, None, None], snapshot, self.cam_snapshot)
-        )
+        ns = self.ns
+        keep = None if mask is None else ns.mask(mask)
+        snapshot = cam_snapshot(self._platoon, self.params.platoon)
+        if keep is not None:
+            snapshot = ns.where(keep[:, None, None], snapshot, self._cam_snapshot)
+        self._cam_snapshot = snapshot
         self.subframe = 0
         if not self.radio_enabled:
             return
-        rp, t = self.params.radio, self.subframes_per_interval
+        b, rp, t = self.batch_size, self.params.radio, self.subframes_per_interval
         tables = self._draw_interval_tables()
         link_state = link.new_link_state(
-            self.batch_size,
-            self.num_links,
-            self.num_subchannels,
-            rp,
-            t,
-            None if self._numpy else self.device,
+            b, self.num_links, self.num_subchannels, rp, t, ns.array_device
         )
         obs = self._rra_observation_buffer(tables)
-        v2i_sum = self.ns.zeros((self.batch_size, self.num_subchannels))
-        if mask is not None:
-            tables, link_state, obs, v2i_sum = self._merge_interval(
-                mask, tables, link_state, obs, v2i_sum
+        v2i_sum = ns.zeros((b, self.num_subchannels))
+        if keep is not None:  # the others keep their interval: tables, CAM progress, ...
+
+            def merge(new, old, batch_dim: int):
+                shape = [1] * new.ndim
+                shape[batch_dim] = b
+                return ns.where(keep.reshape(shape), new, old)
+
+            tables = link.IntervalTables(
+                *(
+                    merge(getattr(tables, f.name), getattr(self.tables, f.name), 1)
+                    for f in dataclasses.fields(tables)
+                )
             )
-            if self._numpy:
-                tables, link_state = tables.numpy(), link_state.numpy()
-                obs, v2i_sum = obs.numpy(), v2i_sum.numpy()
+            link_state = link.LinkState(
+                *(
+                    merge(getattr(link_state, f.name), getattr(self.link_state, f.name), 0)
+                    for f in dataclasses.fields(link_state)
+                )
+            )
+            obs = merge(obs, self._rra_obs, 1)
+            v2i_sum = merge(v2i_sum, self._v2i_rate_sum, 0)
         self.tables, self.link_state, self._rra_obs, self._v2i_rate_sum = (
             tables,
             link_state,
@@ -362,65 +395,29 @@ class DigitalTwin:
             v2i_sum,
         )
 
-    def _merge_interval(self, mask, tables, link_state, obs, v2i_sum):
-        def merge(new, old, batch_dim):
-            new = torch.as_tensor(new, device=self.device)
-            old = torch.as_tensor(old, device=self.device)
-            shape = [1] * new.dim()
-            shape[batch_dim] = -1
-            return torch.where(mask.view(shape), new, old)
-
-        tables = link.IntervalTables(
-            *(
-                merge(getattr(tables, k), getattr(self.tables, k), 1)
-                for k in (
-                    "own_gain",
-                    "v2i_to_rx_mw",
-                    "tx_to_bs_gain",
-                    "cross_gain",
-                    "v2i_signal_mw",
-                )
-            )
-        )
-        link_state = link.LinkState(
-            *(
-                merge(getattr(link_state, k), getattr(self.link_state, k), 0)
-                for k in ("remaining_bits", "delay_subframes", "occupancy")
-            )
-        )
-        return (
-            tables,
-            link_state,
-            merge(obs, self._rra_obs, 1),
-            merge(v2i_sum, self._v2i_rate_sum, 0),
-        )
-
     def _draw_interval_tables(self) -> link.IntervalTables:
-        rp = self.params.radio
-        native = self._native
-        x = native(self.platoon.position_m)
-        moved = abs(x - native(self.shadow_position_m))
-        self.shadow_position_m = self._public(self.ns.copy(x))
+        rp, ns = self.params.radio, self.ns
+        x = self._platoon.position_m
+        moved = abs(x - self._shadow_position_m)
+        self._shadow_position_m = ns.copy(x)
         g = self.generator
         n = x.shape[1]
         # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends
-        v2v_shadow = channel.shadowing_update_db(
-            native(self.v2v_shadow_db),
+        self._v2v_shadow_db = v2v_shadow = channel.shadowing_update_db(
+            self._v2v_shadow_db,
             moved[:, :, None] + moved[:, None, :],
             rp.v2v_shadow_std_db,
             rp.v2v_decorrelation_m,
-            channel.symmetric_normal((self.batch_size, n, n), g, numpy=self._numpy),
+            channel.symmetric_normal((self.batch_size, n, n), g, numpy=ns.numpy),
         )
-        v2i_shadow = channel.shadowing_update_db(
-            native(self.v2i_shadow_db),
+        self._v2i_shadow_db = v2i_shadow = channel.shadowing_update_db(
+            self._v2i_shadow_db,
             moved,
             rp.v2i_shadow_std_db,
             rp.v2i_decorrelation_m,
-            native(torch.randn(self.batch_size, n, generator=g, device=self.device)),
+            ns.from_torch(torch.randn(self.batch_size, n, generator=g, device=self.device)),
         )
-        self.v2v_shadow_db = self._public(v2v_shadow)
-        self.v2i_shadow_db = self._public(v2i_shadow)
-        bs_x = channel.serving_bs_x_m(mean_axis(x, 1), native(self.bs_offset_m), rp)
+        bs_x = channel.serving_bs_x_m(mean_axis(x, 1), self._bs_offset_m, rp)
         lateral = self._lateral_offset_m
         v2v_db, v2i_db = link.large_scale_gains_db(
             channel.v2v_pathloss_db(channel.v2v_distance_m(x, lateral), rp),
@@ -438,12 +435,11 @@ class DigitalTwin:
         occupancy and bits left (filled per subframe), time left, the recipients' control
         state and the features that predict their IVoI (constant over the interval).
 
-        A tensor, or a NumPy array on the NumPy backend.
+        In the backend's arrays.
         """
         t, b, n_l = self.subframes_per_interval, self.batch_size, self.num_links
-        pp, lay, native = self.params.platoon, self.rra_layout, self._native
-        platoon = self._native_platoon()
-        csi = link.rra_static_observation(tables, self.params.radio, self._const_torch.noise_mw)
+        pp, lay, platoon = self.params.platoon, self.rra_layout, self._platoon
+        csi = link.rra_static_observation(tables, self.params.radio, self._const.noise_mw)
         gap_error, speed_error = spacing_errors(platoon, pp)
         control = clamp(
             stack(
@@ -457,9 +453,9 @@ class DigitalTwin:
             -RRA_CONTROL_CLIP,
             RRA_CONTROL_CLIP,
         )
-        age = as_float(native(self.interval)[:, None] - native(self.cam_held_interval))
+        age = as_float(self._interval[:, None] - self._cam_held_interval)
         history = clamp(
-            native(self.command_history) / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
+            self._command_history / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
         )
         obs = self.ns.empty((t, b, n_l, self.rra_obs_dim))
         obs[..., lay.csi] = csi
@@ -468,7 +464,7 @@ class DigitalTwin:
         obs[..., lay.time_left] = self._time_left[:, None, None]
         obs[..., lay.control] = control
         obs[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
-        obs[..., lay["cam_delay_history"]] = native(self.cam_delay_history)
+        obs[..., lay["cam_delay_history"]] = self._cam_delay_history
         obs[..., lay["command_history"]] = history
         return obs
 
@@ -500,14 +496,15 @@ class DigitalTwin:
         outcome = link.subframe_step(self.tables, t, actions, state, self._decode, self._const)
         rate_sum = self._v2i_rate_sum + outcome.v2i_rate_bps
         if mask is not None:
-            lib, keep = self.ns.lib, self.ns.mask(mask)
+            ns = self.ns
+            keep = ns.mask(mask)[:, None]
             state = link.LinkState(
                 *(
-                    lib.where(keep[:, None], getattr(state, f.name), getattr(before, f.name))
+                    ns.where(keep, getattr(state, f.name), getattr(before, f.name))
                     for f in dataclasses.fields(state)
                 )
             )
-            rate_sum = lib.where(keep[:, None], rate_sum, self._v2i_rate_sum)
+            rate_sum = ns.where(keep, rate_sum, self._v2i_rate_sum)
         self.link_state, self._v2i_rate_sum = state, rate_sum
         self.subframe = t + 1
         return outcome
@@ -517,14 +514,12 @@ class DigitalTwin:
         if tuple(actions.shape) != expected:
             raise ValueError(f"RRA actions have shape {tuple(actions.shape)}, expected {expected}")
         n_act = self.params.radio.num_actions
-        if self.backend == "numpy":
-            bad = actions.dtype.kind not in "iu" or actions.min() < 0 or actions.max() >= n_act
-        else:
-            bad = actions.dtype.is_floating_point or bool(
-                ((actions < 0) | (actions >= n_act)).any()
-            )
+        bad = not self.ns.is_integer(actions)
+        if not bad:
+            low, high = self.ns.value_range(actions)
+            bad = low < 0 or high >= n_act
         if bad:
-            count = actions.size if self.backend == "numpy" else actions.numel()
+            count = math.prod(expected)
             shown = actions.tolist() if count <= 16 else f"array of {count}"
             raise ValueError(
                 f"RRA actions {shown} must be integers in [0, {n_act - 1}] "
@@ -565,11 +560,7 @@ class DigitalTwin:
             )
         delay = self.link_state.delay_subframes
         lost = self.subframes_per_interval + 1
-        self.link_state.delay_subframes = self.ns.lib.where(self.ns.mask(mask), lost, delay)
-
-    def _delivery_subframes(self):
-        """CAM delivery subframes [B, L] in the backend's array type."""
-        return self.link_state.delay_subframes
+        self.link_state.delay_subframes = self.ns.where(self.ns.mask(mask), lost, delay)
 
     def switch_subframe(self, perfect: bool) -> torch.Tensor:
         """When u_k takes force in this interval, [B, F] int (docs/model.md §4.5).
@@ -578,14 +569,14 @@ class DigitalTwin:
         first T−1 subframes, else T (the decision is taken at the deadline on an older CAM and
         its command takes force at the next interval).
         """
-        return self._public(self._switch_subframe(perfect))
+        return self.ns.to_torch(self._switch_subframe(perfect))
 
     def _switch_subframe(self, perfect: bool):
         t = self.subframes_per_interval
         if perfect:
             return self.ns.zeros((self.batch_size, self.num_followers), "int64")
-        delay = self._delivery_subframes()
-        return self.ns.lib.where(delay <= t - 1, delay, t)
+        delay = self.link_state.delay_subframes
+        return self.ns.where(delay <= t - 1, delay, t)
 
     def vehicle_observation(self, perfect: bool, cams_lost: bool = False) -> torch.Tensor:
         """What each follower knows when it decides u_k, [B, F, 8] (docs/model.md §2.4, §4.5).
@@ -595,23 +586,19 @@ class DigitalTwin:
         that takes force at the next interval (the counterfactual of a difference IVoI reward,
         the ``cam_lost`` baseline of :class:`~vdtn_marl.voi.RolloutIVoIEstimator`).
         """
-        platoon = self._native_platoon()
+        ns, pp, platoon = self.ns, self.params.platoon, self._platoon
         if perfect:
-            return self._public(perfect_observation(platoon, self.params.platoon))
-        native = self._native
+            return ns.to_torch(perfect_observation(platoon, pp))
+        t = self.subframes_per_interval
         switch = self._switch_subframe(perfect=False)
-        lib = xp(switch)
         if cams_lost:
-            switch = lib.full_like(switch, self.subframes_per_interval)
-        usable = switch < self.subframes_per_interval
-        content = lib.where(usable[..., None], native(self.cam_snapshot), native(self.cam_held))
-        age_intervals = as_float(native(self.interval)[:, None] - native(self.cam_held_interval))
-        age_ms = lib.where(usable, lib.zeros_like(age_intervals), age_intervals * self.interval_ms)
-        return self._public(
-            vehicle_observation(
-                platoon, content, as_float(switch) * self.subframe_ms, age_ms, self.params.platoon
-            )
-        )
+            switch = ns.full(switch.shape, t, "int64")
+        usable = switch < t
+        content = ns.where(usable[..., None], self._cam_snapshot, self._cam_held)
+        age_intervals = as_float(self._interval[:, None] - self._cam_held_interval)
+        age_ms = ns.where(usable, ns.zeros(age_intervals.shape), age_intervals * self.interval_ms)
+        cam_delay_ms = as_float(switch) * self.subframe_ms
+        return ns.to_torch(vehicle_observation(platoon, content, cam_delay_ms, age_ms, pp))
 
     def leader_accel_mps2(self, intervals: torch.Tensor) -> torch.Tensor:
         """Every leader's acceleration (m/s²) in intervals ``intervals`` [B, ...] →
@@ -619,21 +606,14 @@ class DigitalTwin:
 
         ``intervals`` may be a NumPy array (on a CPU twin): the result is one too.
         """
-        b, leaders = self.batch_size, self.num_leaders
-        last = self.leader_speed_mps.shape[-1] - 2
-        k = clamp(intervals, 0, last)
-        flat = k.reshape(b, 1, -1)
-        dt = self.params.platoon.control_interval_s
-        if isinstance(flat, np.ndarray):
-            v = to_numpy(self.leader_speed_mps)
-            rows = np.arange(b)[:, None, None]
-            lead = np.arange(leaders)[None, :, None]
-            accel = (v[rows, lead, flat + 1] - v[rows, lead, flat]) / dt
-        else:
-            v = self.leader_speed_mps
-            flat = flat.expand(b, leaders, flat.shape[-1])
-            accel = (v.gather(2, flat + 1) - v.gather(2, flat)) / dt
-        return accel.swapaxes(1, 2).reshape(*intervals.shape, leaders)
+        return like(self._leader_accel_mps2(self.ns.asarray(intervals)), intervals)
+
+    def _leader_accel_mps2(self, intervals):
+        v = self._leader_speed_mps  # [B, Λ, K]
+        k = clamp(intervals, 0, v.shape[-1] - 2).reshape(self.batch_size, 1, -1)
+        take = self.ns.take_along_axis
+        accel = (take(v, k + 1, 2) - take(v, k, 2)) / self.params.platoon.control_interval_s
+        return accel.swapaxes(1, 2).reshape(*intervals.shape, self.num_leaders)
 
     def finish_interval(
         self,
@@ -659,70 +639,61 @@ class DigitalTwin:
             raise ValueError(
                 f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}"
             )
-        pp = self.params.platoon
-        native, public = self._native, self._public
+        if command_if_lost_mps2 is not None and tuple(command_if_lost_mps2.shape) != expected:
+            raise ValueError(
+                f"command_if_lost_mps2 has shape {tuple(command_if_lost_mps2.shape)}, "
+                f"expected {expected}"
+            )
+        ns, pp = self.ns, self.params.platoon
+        lo, hi = pp.accel_min_mps2, pp.accel_max_mps2
         switch = self._switch_subframe(perfect)
-        before = self._native_platoon()
-        u = clamp(self.ns.float32(commands_mps2), pp.accel_min_mps2, pp.accel_max_mps2)
-        if command_if_lost_mps2 is not None:
-            if tuple(command_if_lost_mps2.shape) != expected:
-                raise ValueError(
-                    f"command_if_lost_mps2 has shape {tuple(command_if_lost_mps2.shape)}, "
-                    f"expected {expected}"
-                )
-            command_if_lost_mps2 = torch.as_tensor(
-                command_if_lost_mps2, dtype=torch.float32, device=self.device
-            ).clamp(pp.accel_min_mps2, pp.accel_max_mps2)
-        interval = native(self.interval)
-        after = self.integrator.integrate(before, self.leader_accel_mps2(interval), u, switch)
+        before, interval = self._platoon, self._interval
+        u = clamp(ns.float32(commands_mps2), lo, hi)
+        after = self.integrator.integrate(before, self._leader_accel_mps2(interval), u, switch)
         gap_error, speed_error = spacing_errors(after, pp)
         follower = self.topology.followers_of
         reward = control_reward(gap_error, speed_error, u, follower(before.command_mps2), pp)
         collided = gaps_m(after.position_m, pp) <= 0
         reward = reward + as_float(collided) * pp.collision_penalty
 
-        lib = xp(u)
         if self.radio_enabled:
-            delay = self._delivery_subframes()
-            mean_rate = native(self._v2i_rate_sum) / max(self.subframe, 1)
+            delay = self.link_state.delay_subframes
+            mean_rate = self._v2i_rate_sum / max(self.subframe, 1)
             delivered = delay <= t
-            self.cam_held = public(
-                lib.where(delivered[..., None], native(self.cam_snapshot), native(self.cam_held))
-            )
-            self.cam_held_interval = public(
-                lib.where(delivered, interval[:, None], native(self.cam_held_interval))
+            self._cam_held = ns.where(delivered[..., None], self._cam_snapshot, self._cam_held)
+            self._cam_held_interval = ns.where(
+                delivered, interval[:, None], self._cam_held_interval
             )
         else:
-            delay = lib.zeros_like(switch)
-            mean_rate = self.ns.zeros((self.batch_size, self.num_subchannels))
+            delay = ns.zeros(switch.shape, "int64")
+            mean_rate = ns.zeros((self.batch_size, self.num_subchannels))
         # the recipients' histories the next interval's RRA observation reads
         delay_fraction = clamp(as_float(delay) / (t + 1), 0.0, 1.0)
-        self.cam_delay_history = public(
-            cat([delay_fraction[..., None], native(self.cam_delay_history)[..., :-1]])
+        self._cam_delay_history = cat(
+            [delay_fraction[..., None], self._cam_delay_history[..., :-1]]
         )
-        self.command_history = public(
-            cat(
-                [
-                    follower(before.command_mps2)[..., None],
-                    native(self.command_history)[..., :-1],
-                ]
-            )
+        self._command_history = cat(
+            [follower(before.command_mps2)[..., None], self._command_history[..., :-1]]
         )
-        record = IntervalRecord(
-            interval=public(self.ns.copy(interval)),
-            state_before=self.platoon,
-            state_after=after.torch() if self._numpy else after,
-            command_mps2=public(u),
-            switch_subframe=public(switch),
-            reward=public(reward),
-            gap_error_m=public(gap_error),
-            speed_error_mps=public(speed_error),
-            collided=public(collided),
-            truncated=public(interval + 1 >= self.params.episode_intervals),
-            cam_delay_subframes=public(delay),
-            v2i_rate_bps=public(mean_rate),
-            command_if_lost_mps2=command_if_lost_mps2,
+        self._platoon, self._interval = after, interval + 1
+        # the record is the edge: torch tensors (sharing the NumPy arrays' memory)
+        out = ns.to_torch
+        return IntervalRecord(
+            interval=out(ns.copy(interval)),
+            state_before=out(before),
+            state_after=out(after),
+            command_mps2=out(u),
+            switch_subframe=out(switch),
+            reward=out(reward),
+            gap_error_m=out(gap_error),
+            speed_error_mps=out(speed_error),
+            collided=out(collided),
+            truncated=out(interval + 1 >= self.params.episode_intervals),
+            cam_delay_subframes=out(delay),
+            v2i_rate_bps=out(mean_rate),
+            command_if_lost_mps2=(
+                None
+                if command_if_lost_mps2 is None
+                else out(clamp(ns.float32(command_if_lost_mps2), lo, hi))
+            ),
         )
-        self.platoon = record.state_after
-        self.interval = public(interval + 1)
-        return record
