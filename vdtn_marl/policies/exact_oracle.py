@@ -354,8 +354,6 @@ class ExactOracleController:
         command = _as_numpy(state.command_mps2[scenario])
         intervals = np.zeros((twin.batch_size, horizon), dtype=np.int64)
         intervals[scenario] = interval + np.arange(horizon)
-        if not isinstance(twin.interval, np.ndarray):
-            intervals = torch.as_tensor(intervals, device=twin.device)
         lead_a = _as_numpy(twin.leader_accel_mps2(intervals)[scenario])  # [H, Λ]
         # every leader as IntervalIntegrator moves it, relative to its present position (m)
         dt = pp.control_interval_s
