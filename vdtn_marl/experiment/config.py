@@ -126,6 +126,7 @@ class RRAConfig:
     throughput_scale: float = RRAReward.throughput_scale  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = RRAReward.ivoi_scale  # multiplies ξ before κ2
     miss_penalty: float = RRAReward.miss_penalty  # drra: penalty of a CAM that misses its interval
+    aoi_scale: float = RRAReward.aoi_scale  # aoi: reward units per ms of Age of Information
 
     @property
     def learned(self) -> bool:
@@ -251,6 +252,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("rra.throughput_scale", r.throughput_scale, 0.0, 1e6)
     _real("rra.ivoi_scale", r.ivoi_scale, 0.0, 1e6)
     _real("rra.miss_penalty", r.miss_penalty, 0.0, 1e6)
+    _real("rra.aoi_scale", r.aoi_scale, 0.0, 1e6)
     for key in (
         "depth",
         "num_cells",

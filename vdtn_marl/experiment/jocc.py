@@ -10,10 +10,11 @@ One JOCC iteration runs four stages:
    learned RRA policy afterwards (or the configured RRA baseline);
 3. ``rra``: hand the VoI estimator (``td`` with π*'s critic as v*, or ``rollout``) to the RRA
    environment, whose control module is π̃, and train the RRA agents (MAPPO, group ``rra``)
-   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``throughput``);
+   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``aoi``; ``throughput``);
 4. ``evaluate``: π̃ with the RRA policy on impaired observations and π* on perfect ones, over
-   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, V2I
-   throughput per link, EVoI with its 95% CI (and the IVoI sum for comparison).
+   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, Age
+   of Information, V2I throughput per link, EVoI with its 95% CI (and the IVoI sum for
+   comparison).
 
 ``vdtn-marl train`` runs a subset of the stages (see :data:`TASK_STAGES`). Baselines slot in
 by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
@@ -191,6 +192,7 @@ class JointOptimisation:
                 throughput_scale=rra.throughput_scale,
                 ivoi_scale=rra.ivoi_scale,
                 miss_penalty=rra.miss_penalty,
+                aoi_scale=rra.aoi_scale,
                 burn_in_intervals=algo.rra_burn_in_intervals,
                 **completion_kw,
             )
