@@ -33,6 +33,7 @@ PLOT_KINDS = (
     "v2i_throughput",
     "cam_delivery",
     "control_cost",
+    "aoi",
     "cam_latency_cdf",
     "pareto_kappa1",
     "training_curves",
@@ -373,7 +374,7 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 def test_shipped_benchmarks_plan_their_grid():
     shipped = (
-        ("smoke", 12), ("reduced", 185), ("leaderboard", 165), ("sensitivity", 25),
+        ("smoke", 14), ("reduced", 185), ("leaderboard", 180), ("sensitivity", 25),
         ("headline", 20), ("value_fit", 15),
     )  # fmt: skip
     for name, cells in shipped:
@@ -410,7 +411,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
         assert "experiment.rra_iterations=16" in b.budgets[method], method
     assert not {"random", "round_robin", "greedy", "oracle"} & set(b.budgets)
     smoke = cli_help.read_conf_yaml("benchmark", "smoke.yaml")
-    assert smoke["version"] == "2.0" and smoke["experiment"] == "smoke"
+    assert smoke["version"] == "2.1" and smoke["experiment"] == "smoke"
     assert not any("jocc_iterations" in str(o) for o in smoke.get("budgets", {}).values())
     sens = cli_help.read_conf_yaml("benchmark", "sensitivity.yaml")
     assert (sens["version"], sens["scenarios"]) == ("1.0", ["platoon4_noise90"])
@@ -554,6 +555,19 @@ def test_finished_cell_with_another_config_is_an_error(tmp_path):
     assert leaderboard.complete_summary(tmp_path, data) is None
 
 
+def test_a_cell_finished_before_aoi_was_reported_stays_finished(tmp_path):
+    """A summary without the metrics that came later (AoI) is a finished cell: resuming a
+    benchmark does not run it again, and its runs are left out of those columns only."""
+    assert set(leaderboard.AOI_KEYS) <= set(leaderboard.METRIC_KEYS)
+    data = {"seed": 0, "experiment": {"jocc_iterations": 1}}
+    summary = {k: 0.0 for k in leaderboard.METRIC_KEYS if k not in leaderboard.AOI_KEYS}
+    summary.update(iterations=1, config=data)
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    assert leaderboard.complete_summary(tmp_path, data) is not None
+    stat = leaderboard.aggregate([summary.get("aoi_ms_mean")] * 3)
+    assert stat["n"] == 0 and stat["mean"] is None
+
+
 # --- the smoke benchmark end to end ---------------------------------------------------------
 
 
@@ -577,7 +591,11 @@ def smoke(tmp_path_factory):
         out_dir=str(out),
         report_dir=str(report),
     )
-    return {"out": out, "report": report, "result": result, "cfg": cfg, "args": args, "cwd": base}
+    cells = len(cfg.benchmark.methods) * len(cfg.benchmark.seeds)
+    return {
+        "out": out, "report": report, "result": result, "cfg": cfg, "args": args, "cwd": base,
+        "cells": cells,
+    }  # fmt: skip
 
 
 def _strict_json(path: Path):
@@ -593,7 +611,7 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
     b = cfg.benchmark
     assert (data["benchmark"], data["version"]) == (b.name, b.version)
     assert data["command"].startswith("vdtn-marl bench benchmark=smoke")
-    assert data["cells"] == {"total": 12, "complete": 12}
+    assert data["cells"] == {"total": smoke["cells"], "complete": smoke["cells"]}
     assert list(data["statistics"]) == b.scenarios
     for scenario, by_method in data["statistics"].items():
         assert list(by_method) == list(b.methods)
@@ -603,8 +621,8 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
             delivering = sum(r["cam_delivery_rate"] > 0 for r in runs)
             for key, stat in metrics.items():
                 assert set(stat) == set(leaderboard.STAT_KEYS)
-                # latency is undefined (null) for a run that delivered no CAM
-                expected = delivering if key in leaderboard.CAM_LATENCY_KEYS else len(b.seeds)
+                # latency and peak AoI are undefined (null) for a run that delivered no CAM
+                expected = delivering if key in leaderboard.NO_DELIVERY_KEYS else len(b.seeds)
                 assert stat["n"] == expected, (method, key)
                 if expected == 0:
                     assert stat["mean"] is None
@@ -620,7 +638,7 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
     assert (method_info["interval_method"], method_info["iqm_interval_method"]) == ("t", "bca")
     assert method_info["interval"].startswith("95% Student-t CI")
     runs = data["runs"]
-    assert len(runs) == 12
+    assert len(runs) == smoke["cells"]
     assert {r["version"] for r in runs} == {b.version}
     for run in runs:
         for key in ("control_cost", "gap_error_abs_m", "v2i_throughput_mbps_per_link", "evoi"):
@@ -649,7 +667,7 @@ def test_smoke_writes_marl_eval_json_and_csv(smoke):
     assert len(rows) == len(b.scenarios) * len(b.methods) * len(leaderboard.METRICS)
     assert {r["version"] for r in rows} == {b.version}
     with open(smoke["report"] / leaderboard.RUNS_CSV, newline="", encoding="utf-8") as handle:
-        assert len(list(csv.DictReader(handle))) == 12
+        assert len(list(csv.DictReader(handle))) == smoke["cells"]
 
 
 def test_smoke_writes_markdown_and_plots(smoke):
@@ -669,6 +687,7 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert "training and evaluation drives come from different vehicles" in text
     for method in b.methods:
         assert f"| {method} |" in text
+    assert "AoI mean (ms) ↓" in text and "peak AoI (ms) ↓" in text
     for kind in PLOT_KINDS:
         path = smoke["report"] / f"leaderboard_platoon4_{kind}.png"
         assert path.is_file(), kind
@@ -683,7 +702,7 @@ def test_smoke_writes_markdown_and_plots(smoke):
 def test_smoke_resume_skips_finished_cells(smoke):
     cfg = smoke["cfg"]
     summaries = sorted(smoke["out"].rglob("summary.json"))
-    assert len(summaries) == 12
+    assert len(summaries) == smoke["cells"]
     before = {p: p.stat().st_mtime_ns for p in summaries}
     redo = smoke["out"] / "platoon4" / "greedy" / "seed1" / "summary.json"
     redo.unlink()
@@ -700,7 +719,7 @@ def test_smoke_resume_skips_finished_cells(smoke):
     cfg.cells = []
     result = leaderboard.run_benchmark(cfg, command="test")
     assert not result.ran
-    assert len(result.done) == 12 and not result.failed and not result.pending
+    assert len(result.done) == smoke["cells"] and not result.failed and not result.pending
     # run=false: nothing runs, the missing cell stays missing, the report is written
     redo.unlink()
     cfg.run = False
@@ -718,7 +737,7 @@ def test_smoke_resume_skips_finished_cells(smoke):
     # and through the CLI: nothing left to run
     again = _run_cli(*smoke["args"], cwd=smoke["cwd"])
     assert again.returncode == 0, again.stderr[-3000:]
-    assert "0 cell(s) run now, 12 already complete" in again.stdout
+    assert f"0 cell(s) run now, {smoke['cells']} already complete" in again.stdout
 
 
 def test_script_forwards_to_the_cli():

@@ -19,7 +19,7 @@ from vdtn_marl.data.traces import trace_set_provenance
 from vdtn_marl.errors import LeaderboardError
 from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.experiment.config import BenchConfig
-from vdtn_marl.experiment.metrics import METRICS
+from vdtn_marl.experiment.metrics import AOI_KEYS, METRICS
 from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
 from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan
 from vdtn_marl.leaderboard.plots import write_plots
@@ -312,11 +312,31 @@ def _markdown(
                 )
                 + ".",
             ]
+        missing_aoi = [
+            method
+            for method, metrics in by_method.items()
+            if min(metrics[k]["n"] for k in AOI_KEYS) < metrics["control_cost"]["n"]
+        ]
+        if missing_aoi:
+            lines += [
+                "",
+                "Age of Information is missing from runs written before vdtn-marl reported it, "
+                "and peak AoI is undefined for a run that delivered no CAM; those runs are left "
+                "out of the AoI columns: "
+                + ", ".join(
+                    f"{m} (AoI {by_method[m]['aoi_ms_mean']['n']}, peak AoI "
+                    f"{by_method[m]['peak_aoi_ms_mean']['n']} of "
+                    f"{by_method[m]['control_cost']['n']})"
+                    for m in missing_aoi
+                )
+                + ".",
+            ]
         scenario_plots = plots.get(scenario, {})
         captions = {
             "error_traces": "Gap and speed errors over time",
             "v2i_throughput": "V2I throughput per link",
             "cam_delivery": "CAM delivery rate",
+            "aoi": "Age of Information",
             "cam_latency_cdf": "CAM latency CDF",
             "pareto_kappa1": "κ1 Pareto front",
             "control_cost": "Control cost",
