@@ -220,6 +220,39 @@ def test_eval_of_a_checkpoint_without_trained_acting_policies_is_refused(
     assert cli.main(["eval", "checkpoint=run", *baselines]) == 0 and calls
 
 
+def test_eval_video_draws_every_interval_of_the_first_scenario_and_moves_no_result(
+    tmp_path, monkeypatch
+):
+    iio = pytest.importorskip("imageio.v3")
+    _make_run(tmp_path / "run", ["experiment=smoke", "progress=false"], "jocc", TRAINED)
+    monkeypatch.chdir(tmp_path)
+    common = ["eval", "checkpoint=run", "progress=false"]
+    assert cli.main([*common, "hydra.run.dir=plain"]) == 0
+    assert cli.main([*common, "hydra.run.dir=filmed", "video=true"]) == 0
+    plain, filmed = (
+        json.loads((tmp_path / d / "summary.json").read_text()) for d in ("plain", "filmed")
+    )
+    path = tmp_path / "filmed" / "episode.gif"
+    assert filmed["video"] == str(path.resolve()) and "video" not in plain
+    frames = iio.imread(path, index=None)
+    assert frames.shape[0] == filmed["config"]["experiment"]["eval_intervals"] == 5
+    assert frames.shape[-1] in (3, 4) and frames.std() > 0
+    assert not list((tmp_path / "plain").glob("episode.*"))
+    for key in ("control_cost", "cam_delivery_rate", "aoi_ms_mean", "evoi"):
+        assert filmed[key] == plain[key], key
+
+
+def test_eval_video_without_its_library_is_one_line(tmp_path, monkeypatch, capsys):
+    from vdtn_marl.io import video
+
+    _make_run(tmp_path / "run", ["experiment=smoke"], "jocc", TRAINED)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(video, "installed", lambda module: module != "imageio_ffmpeg")
+    assert cli.main(["eval", "checkpoint=run", "video=true", "video_format=mp4"]) == 2
+    _one_line(capsys.readouterr().err, "video_format=mp4", "pip install 'vdtn-marl[video]'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
 # --- 3. a run folder is never overwritten ---------------------------------------------------
 
 

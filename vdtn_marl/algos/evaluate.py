@@ -132,6 +132,7 @@ def evaluate_system(
     ivoi_estimator: IVoIEstimator | None = None,
     record_traces: bool = False,
     completion=None,
+    on_interval: Callable | None = None,
 ) -> EvalResult:
     """Run ``episodes`` scenarios for ``intervals`` intervals; see the module doc.
 
@@ -139,7 +140,8 @@ def evaluate_system(
     is given, in which case the radio runs for its metrics but the followers still observe
     perfectly. With ``perfect=False`` the radio runs with ``rra`` (default: uniformly random)
     and ``completion`` (a completer of :mod:`vdtn_marl.sim.completion`) fills in stale CAM
-    content before the control policy sees it.
+    content before the control policy sees it. ``on_interval(twin, record)`` is called after
+    every interval (to draw it, for instance); it must not change the twin.
     """
     if intervals > params.episode_intervals:
         raise ValueError(
@@ -228,6 +230,8 @@ def evaluate_system(
             if xi is not None:
                 xi_delivered.add(xi, delivered)
                 xi_lost.add(xi, ~in_time & alive[:, None])
+        if on_interval is not None:
+            on_interval(twin, record)
         if record_traces:
             gap_trace.append(record.gap_error_m[0].abs().cpu())
             speed_trace.append(record.speed_error_mps[0].abs().cpu())

@@ -256,6 +256,7 @@ _OUTPUTS = {
     "eval": [
         "  config.yaml (the run's config with your overrides), evaluation.csv, summary.json",
         "  (with `warnings` naming policies the checkpoint never trained), eval.log, .hydra/",
+        "  video=true: episode.gif (video_format=mp4: episode.mp4) of the first scenario",
     ],
 }
 

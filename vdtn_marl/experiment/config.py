@@ -19,6 +19,8 @@ from vdtn_marl.algos.params import AlgoConfig
 from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.io.loggers import DEFAULT_LOGGERS, check_loggers
+from vdtn_marl.io.video import VIDEO_FORMATS, check_video
 from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
 from vdtn_marl.sim.params import TwinParams
@@ -148,6 +150,9 @@ class ExperimentConfig:
     eval_episodes: int = 16  # scenarios evaluated (one batch)
     eval_intervals: int = 200  # control intervals per evaluation episode
     checkpoint_every: int = 10  # iterations between checkpoints (0: only at the end)
+    # where the metrics go besides metrics.csv and evaluation.csv (always written, the source
+    # of plots): csv, tensorboard, wandb, mlflow (TorchRL's loggers; vdtn_marl/io/loggers.py)
+    loggers: list[str] = field(default_factory=lambda: list(DEFAULT_LOGGERS))
 
 
 @dataclass
@@ -169,6 +174,10 @@ class RunConfig:
     # a directory where π*'s warm start is memoised and shared by the runs that would compute
     # the same one (vdtn_marl/experiment/warm_start.py); results do not depend on it
     warm_start_cache: str | None = None
+    # each evaluation also writes its first scenario as a video, one frame per control
+    # interval (<run>/episode.gif or .mp4; needs vdtn-marl[video]; vdtn_marl/io/video.py)
+    video: bool = False
+    video_format: str = "gif"  # gif or mp4
 
     def twin_params(self) -> TwinParams:
         """The model of the run, with its scenario's topology."""
@@ -290,6 +299,12 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive_int(f"experiment.{key}", getattr(e, key), low=0)
     _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
     _positive_int("threads", cfg.threads, low=0, high=1024)
+    check_loggers(e.loggers, "experiment.loggers")  # names, and the extra of a missing one
+    if not isinstance(cfg.video, bool):
+        raise ConfigError(f"video={cfg.video!r} must be true or false")
+    _choice("video_format", cfg.video_format, tuple(VIDEO_FORMATS))
+    if cfg.video:
+        check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
     _choice("scenario.kind", s.kind, tuple(SCENARIOS))
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)

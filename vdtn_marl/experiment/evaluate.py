@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -58,11 +58,14 @@ class ActingSystem:
 @dataclass
 class Evaluation:
     """One ``evaluate`` stage: the row of ``evaluation.csv`` and the results behind it
-    (``acting`` is None when π* was scored against the CACC)."""
+    (``acting`` is None when π* was scored against the CACC), and with ``video=True`` the
+    frames of its first scenario, one per control interval (the acting system's; π*'s when
+    there is none)."""
 
     row: dict[str, Any]
     optimal: EvalResult
     acting: EvalResult | None
+    frames: list = field(default_factory=list)
 
 
 def evaluate_stage(
@@ -74,17 +77,30 @@ def evaluate_stage(
     trace_source: str | TraceSource,
     device: torch.device,
     jocc_iteration: int,
+    video: bool = False,
 ) -> Evaluation:
     """Evaluate π* (``optimal_policy``, perfect observations) and the ``acting`` system over
     ``cfg.experiment.eval_episodes`` held-out scenarios of ``eval_intervals`` intervals; with
-    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead."""
+    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead. ``video``:
+    render the first scenario after every interval (:func:`~vdtn_marl.envs.render.render_twin`);
+    drawing reads the twin and changes no result."""
+    frames: list = []
+
+    def draw(twin, record) -> None:
+        from vdtn_marl.envs.render import render_twin  # matplotlib, only for a video
+
+        frames.append(render_twin(twin, record))
+
     common = dict(
         episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
         seed=EVAL_SEED_OFFSET + cfg.seed, gamma=cfg.algo.gamma, device=device,
         trace_source=trace_source,
     )  # fmt: skip
     began = time.perf_counter()
-    optimal = evaluate_system(params, optimal_policy, None, perfect=True, **common)
+    optimal = evaluate_system(
+        params, optimal_policy, None, perfect=True,
+        on_interval=draw if video and acting is None else None, **common,
+    )  # fmt: skip
     row: dict[str, Any] = {"jocc_iteration": jocc_iteration}
     result = None
     if acting is None:
@@ -100,6 +116,7 @@ def evaluate_stage(
             ivoi_estimator=acting.ivoi_estimator,
             record_traces=True,
             completion=acting.completion,
+            on_interval=draw if video else None,
             **common,
         )
         evoi, low, high = expected_voi(result.returns, optimal.returns)
@@ -111,7 +128,7 @@ def evaluate_stage(
             ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
         )  # fmt: skip
     row["eval_seconds"] = time.perf_counter() - began
-    return Evaluation(row, optimal, result)
+    return Evaluation(row, optimal, result, frames)
 
 
 def run_summary(
@@ -126,6 +143,7 @@ def run_summary(
     eval_rows: Sequence[Mapping[str, Any]],
     seconds: float,
     resumed: bool,
+    video: Any = None,
 ) -> dict[str, Any]:
     """The summary of a run of ``task`` (its ``stages``) at ``position``: ``evaluation`` is the
     last evaluation's row, ``eval_rows`` every evaluation's (``evaluation.csv``)."""
@@ -156,6 +174,8 @@ def run_summary(
         "per_iteration": [
             {k: row.get(k) for k in PER_ITERATION_METRICS if k in row} for row in eval_rows
         ],
+        # video=true: the last evaluation's video
+        **({"video": str(video)} if video is not None else {}),
         "config": summary_config(cfg, task),
     }
 

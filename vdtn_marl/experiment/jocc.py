@@ -66,9 +66,12 @@ from vdtn_marl.io.files import (
 )
 from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
 from vdtn_marl.io.log import logged_stage, progress
+from vdtn_marl.io.loggers import RunLoggers
 from vdtn_marl.io.metrics import MetricsLog
+from vdtn_marl.io.video import write_video
 from vdtn_marl.policies import make_control_baseline, make_rra_baseline
 from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.reporting.tables import flatten
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, make_ivoi_estimator
 
@@ -213,9 +216,18 @@ class JointOptimisation:
                 active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
             )
         self.position = {"iteration": 0, "stage": 0, "stage_start": None}
-        self.train_log = MetricsLog(self.run_dir, tensorboard=True)
-        self.eval_log = MetricsLog(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
+        # TensorBoard, W&B, MLflow beside the CSV tables (experiment.loggers), opened on the
+        # first row; the two logs share them
+        self.loggers = RunLoggers(
+            cfg.experiment.loggers,
+            self.run_dir,
+            run_name=f"{task} {self.run_dir.resolve().parent.name}/{self.run_dir.name}",
+            hparams=flatten(to_dict(cfg)),
+        )
+        self.train_log = MetricsLog(self.run_dir, loggers=self.loggers)
+        self.eval_log = MetricsLog(self.run_dir, filename=EVALUATION_FILE, loggers=self.loggers)
         self.last_evaluation: dict[str, Any] | None = None
+        self.video: Path | None = None  # the last evaluation's (video=true)
 
     # ------------------------------------------------------------------ policies
     def control_policy(self):
@@ -341,7 +353,7 @@ class JointOptimisation:
                 stats = trainer.train_iteration()
                 row = {"jocc_iteration": self.position["iteration"], "stage": stage}
                 row.update(stats.__dict__)
-                self.train_log.log(row, step=None)
+                self.train_log.log(row, step=stats.iteration, prefix=stage, step_key="iteration")
                 bar.update(1)
                 bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
                 if interrupt_requested() and trainer.iteration < end:
@@ -444,9 +456,16 @@ class JointOptimisation:
             trace_source=self.eval_traces,
             device=self.device,
             jocc_iteration=self.position["iteration"],
+            video=self.cfg.video,
         )
         self._last_results = (result.optimal, result.acting)
-        self.eval_log.log(result.row)
+        if result.frames:
+            fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
+            self.video = write_video(self.run_dir, result.frames, fps, self.cfg.video_format)
+            _log.info("video of evaluation scenario 0: %s", self.video)
+        self.eval_log.log(
+            result.row, step=self.position["iteration"], prefix="eval", step_key="jocc_iteration"
+        )
         self.last_evaluation = result.row
         return result.row
 
@@ -482,7 +501,7 @@ class JointOptimisation:
         self.write_raw_evaluation()
         summary["plots"] = self.write_plots()
         atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
-        self.train_log.close()
+        self.loggers.close()
         return summary
 
     def write_raw_evaluation(self) -> None:
@@ -531,6 +550,7 @@ class JointOptimisation:
             eval_rows=self.eval_log.rows,
             seconds=seconds,
             resumed=resumed,
+            video=self.video,
         )
 
 
