@@ -11,6 +11,7 @@ import re
 import subprocess
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -697,6 +698,31 @@ def test_smoke_writes_markdown_and_plots(smoke):
     cell = smoke["out"] / "platoon4" / "drra" / "seed0"
     for name in ("summary.json", "config.yaml", "metrics.csv", RAW_EVALUATION_FILE):
         assert (cell / name).is_file(), name
+
+
+def test_smoke_videos_show_the_trace_methods_best_and_worst_held_out_scenario(smoke, tmp_path):
+    """video=true: per scenario and trace method, the first seed's run evaluated again on the
+    same held-out scenarios; its best and worst scenario (by the acting system's control
+    return, as the cell's own evaluation_raw.npz has them) as GIFs of one frame per interval."""
+    iio = pytest.importorskip("imageio.v3")
+    import numpy as np
+
+    cfg = replace(smoke["cfg"], run=False, video=True, report_dir=str(tmp_path), progress=False)
+    leaderboard.run_benchmark(cfg, command="test")
+    b = cfg.benchmark
+    text = (tmp_path / leaderboard.REPORT_FILE).read_text(encoding="utf-8")
+    intervals = cli_help.read_conf_yaml("experiment", "smoke.yaml")["experiment"]["eval_intervals"]
+    for scenario in b.scenarios:
+        for method in b.trace_methods:
+            seed = min(b.seeds)
+            raw = np.load(smoke["out"] / scenario / method / f"seed{seed}" / "evaluation_raw.npz")
+            expected = {"best": int(raw["returns"].argmax()), "worst": int(raw["returns"].argmin())}
+            assert expected["best"] != expected["worst"]
+            for label, index in expected.items():
+                name = f"leaderboard_{scenario}_{method}_{label}.gif"
+                assert iio.imread(tmp_path / name, index=None).shape[0] == intervals
+                assert f"[{method} seed {seed} {label} (scenario {index})]({name})" in text
+    assert not list(tmp_path.glob("*.tmp*")) and not list(smoke["report"].glob("*.gif"))
 
 
 def test_smoke_resume_skips_finished_cells(smoke):

@@ -10,8 +10,6 @@ from vdtn_marl.errors import ConfigError
 from vdtn_marl.io import video as video_module
 from vdtn_marl.io.video import MP4_BLOCK, VIDEO_FORMATS, check_video, write_video
 
-iio = pytest.importorskip("imageio.v3")
-
 
 def _frames(count: int, height: int = 45, width: int = 80) -> list[np.ndarray]:
     """``count`` frames of one flat colour each: red rises frame by frame."""
@@ -20,6 +18,7 @@ def _frames(count: int, height: int = 45, width: int = 80) -> list[np.ndarray]:
 
 
 def test_a_gif_holds_every_frame_in_order_and_loops(tmp_path):
+    iio = pytest.importorskip("imageio.v3")
     frames = _frames(6)
     path = write_video(tmp_path, frames, fps=20.0, video_format="gif")
     assert path == tmp_path / "episode.gif"
@@ -32,6 +31,7 @@ def test_a_gif_holds_every_frame_in_order_and_loops(tmp_path):
 
 
 def test_an_mp4_holds_every_frame_padded_to_whole_blocks(tmp_path):
+    iio = pytest.importorskip("imageio.v3")
     pytest.importorskip("imageio_ffmpeg")
     path = write_video(tmp_path, _frames(7), fps=20.0, video_format="mp4")
     read = np.stack(list(iio.imiter(path, plugin="FFMPEG")))
@@ -56,6 +56,22 @@ def test_an_unknown_format_names_the_key_and_the_choices():
 
 
 def test_a_video_needs_frames(tmp_path):
+    pytest.importorskip("imageio")
     with pytest.raises(ValueError, match="at least one frame"):
         write_video(tmp_path, [], fps=20.0, video_format="gif")
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("command", [["jocc", "experiment=smoke"], ["bench", "benchmark=smoke"]])
+def test_video_without_its_library_is_one_line_before_anything_is_written(
+    command, tmp_path, monkeypatch, capsys
+):
+    from vdtn_marl import cli
+
+    monkeypatch.setattr(video_module, "installed", lambda module: module != "imageio_ffmpeg")
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*command, "video=true", "video_format=mp4"]) == 2
+    (line,) = [x for x in capsys.readouterr().err.splitlines() if x.strip()]
+    assert line.startswith("error: ") and "video_format=mp4" in line
+    assert "pip install 'vdtn-marl[video]'" in line
     assert list(tmp_path.iterdir()) == []

@@ -20,7 +20,7 @@ from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.io.loggers import DEFAULT_LOGGERS, check_loggers
-from vdtn_marl.io.video import VIDEO_FORMATS, check_video
+from vdtn_marl.io.video import VIDEO_FORMATS, VIDEO_SCENARIOS, check_video
 from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
 from vdtn_marl.sim.params import TwinParams
@@ -174,10 +174,13 @@ class RunConfig:
     # a directory where π*'s warm start is memoised and shared by the runs that would compute
     # the same one (vdtn_marl/experiment/warm_start.py); results do not depend on it
     warm_start_cache: str | None = None
-    # each evaluation also writes its first scenario as a video, one frame per control
+    # each evaluation also writes held-out scenarios as videos, one frame per control
     # interval (<run>/episode.gif or .mp4; needs vdtn-marl[video]; vdtn_marl/io/video.py)
     video: bool = False
     video_format: str = "gif"  # gif or mp4
+    # which held-out scenarios: first (episode.<format>) or best_worst (the highest and lowest
+    # control return: episode_best and episode_worst, by a second run of the evaluation)
+    video_scenarios: str = "first"
 
     def twin_params(self) -> TwinParams:
         """The model of the run, with its scenario's topology."""
@@ -303,6 +306,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     if not isinstance(cfg.video, bool):
         raise ConfigError(f"video={cfg.video!r} must be true or false")
     _choice("video_format", cfg.video_format, tuple(VIDEO_FORMATS))
+    _choice("video_scenarios", cfg.video_scenarios, tuple(VIDEO_SCENARIOS))
     if cfg.video:
         check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
     _choice("scenario.kind", s.kind, tuple(SCENARIOS))
@@ -489,6 +493,8 @@ class BenchConfig:
     ``run=false`` runs no cell and only writes the report of the complete ones.
     ``share_warm_starts`` lets the cells that would compute the same warm start of π* share it
     through ``<out_dir>/warm_starts`` (``warm_start_cache``; the results do not change).
+    ``video`` adds videos of the two ``trace_methods`` on their best and worst held-out scenario
+    to the report (:mod:`vdtn_marl.leaderboard.videos`).
     """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
@@ -502,6 +508,10 @@ class BenchConfig:
     device: str = "cpu"
     progress: bool = True
     share_warm_starts: bool = True
+    # the report also writes videos of the trace methods on their best and worst held-out
+    # scenario (vdtn_marl/leaderboard/videos.py; needs vdtn-marl[video])
+    video: bool = False
+    video_format: str = "gif"  # gif or mp4
 
 
 #: Keys a benchmark sets itself in every cell; a method or budget may not set them.
@@ -525,6 +535,11 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
     b = cfg.benchmark
     if not b.version:
         raise ConfigError("benchmark.version='' must name the benchmark's version, e.g. '0.1'")
+    if not isinstance(cfg.video, bool):
+        raise ConfigError(f"video={cfg.video!r} must be true or false")
+    _choice("video_format", cfg.video_format, tuple(VIDEO_FORMATS))
+    if cfg.video:
+        check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
     if not re.fullmatch(_NAME_PATTERN, b.name):
         raise ConfigError(
             f"benchmark.name={b.name!r} must be a plain name (letters, digits, _ . + -)"

@@ -227,7 +227,8 @@ class JointOptimisation:
         self.train_log = MetricsLog(self.run_dir, loggers=self.loggers)
         self.eval_log = MetricsLog(self.run_dir, filename=EVALUATION_FILE, loggers=self.loggers)
         self.last_evaluation: dict[str, Any] | None = None
-        self.video: Path | None = None  # the last evaluation's (video=true)
+        self.videos: dict[str, Path] = {}  # the last evaluation's, by stem (video=true)
+        self.video_indices: dict[str, int] = {}  # and the held-out scenario each shows
 
     # ------------------------------------------------------------------ policies
     def control_policy(self):
@@ -456,13 +457,14 @@ class JointOptimisation:
             trace_source=self.eval_traces,
             device=self.device,
             jocc_iteration=self.position["iteration"],
-            video=self.cfg.video,
+            video=self.cfg.video_scenarios if self.cfg.video else None,
         )
         self._last_results = (result.optimal, result.acting)
-        if result.frames:
-            fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
-            self.video = write_video(self.run_dir, result.frames, fps, self.cfg.video_format)
-            _log.info("video of evaluation scenario 0: %s", self.video)
+        fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
+        for stem, frames in result.frames.items():
+            path = write_video(self.run_dir, frames, fps, self.cfg.video_format, stem=stem)
+            self.videos[stem], self.video_indices[stem] = path, result.drawn[stem]
+            _log.info("video of evaluation scenario %d: %s", result.drawn[stem], path)
         self.eval_log.log(
             result.row, step=self.position["iteration"], prefix="eval", step_key="jocc_iteration"
         )
@@ -550,7 +552,7 @@ class JointOptimisation:
             eval_rows=self.eval_log.rows,
             seconds=seconds,
             resumed=resumed,
-            video=self.video,
+            videos=self.videos,
         )
 
 

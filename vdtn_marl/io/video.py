@@ -20,6 +20,12 @@ from vdtn_marl.io.files import atomic_write_bytes
 #: ``video_format`` choices: the modules each needs (all in the ``video`` extra).
 VIDEO_FORMATS = {"gif": ("imageio",), "mp4": ("imageio", "imageio_ffmpeg")}
 VIDEO_STEM = "episode"  # <run>/episode.gif or .mp4
+#: ``video_scenarios`` choices: the held-out scenarios an evaluation with ``video=true`` draws,
+#: as the stems of their files (vdtn_marl/experiment/evaluate.py draws them).
+VIDEO_SCENARIOS = {
+    "first": (VIDEO_STEM,),  # the first scenario, drawn during the evaluation
+    "best_worst": ("episode_best", "episode_worst"),  # highest and lowest control return
+}
 #: H.264 players want frame sides divisible by 16: frames are padded (edge pixels) to it.
 MP4_BLOCK = 16
 
@@ -63,7 +69,9 @@ def encode_video(frames: Sequence, fps: float, video_format: str = "gif") -> byt
     return iio.imwrite("<bytes>", stack, extension=".mp4", plugin="FFMPEG", fps=fps)
 
 
-def write_video(run_dir: str | Path, frames: Sequence, fps: float, video_format: str) -> Path:
-    """``<run_dir>/episode.<format>`` from ``frames`` (:func:`encode_video`), atomically."""
-    path = Path(run_dir) / f"{VIDEO_STEM}.{video_format}"
+def write_video(
+    folder: str | Path, frames: Sequence, fps: float, video_format: str, stem: str = VIDEO_STEM
+) -> Path:
+    """``<folder>/<stem>.<format>`` from ``frames`` (:func:`encode_video`), atomically."""
+    path = Path(folder) / f"{stem}.{video_format}"
     return atomic_write_bytes(path, encode_video(frames, fps, video_format))

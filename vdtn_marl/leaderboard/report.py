@@ -36,6 +36,7 @@ from vdtn_marl.leaderboard.stats import (
     statistics,
 )
 from vdtn_marl.leaderboard.target import check_target, target_markdown
+from vdtn_marl.leaderboard.videos import LeaderboardVideo, write_videos
 from vdtn_marl.reporting.tables import is_finite
 
 REPORT_FILE = "LEADERBOARD.md"
@@ -200,6 +201,7 @@ def _markdown(
     dropped: Sequence[str],
     target: Mapping[str, Any] | None = None,
     marl_eval_left_out: int = 0,
+    videos: Sequence[LeaderboardVideo] = (),
 ) -> str:
     b = cfg.benchmark
     table_metrics = [m for m in METRICS if m.table]
@@ -347,6 +349,19 @@ def _markdown(
             for kind, caption in captions.items():
                 if kind in scenario_plots:
                     lines.append(f"![{scenario}: {caption}]({_png(scenario_plots[kind])})")
+        mine = [v for v in videos if v.cell.scenario == scenario]
+        if mine:
+            lines += [
+                "",
+                "Videos (one frame per control interval) of the held-out evaluation scenario with "
+                "the highest (best) and the lowest (worst) control return: "
+                + ", ".join(
+                    f"[{v.cell.method} seed {v.cell.seed} {v.label} (scenario "
+                    f"{v.scenario_index})]({_png(v.path)})"
+                    for v in mine
+                )
+                + ".",
+            ]
     lines += [
         "",
         "## Files",
@@ -389,6 +404,7 @@ def write_report(
     stats = statistics(rows, b)
     paired = paired_differences(rows, b)
     plots = write_plots(cfg, rows, stats, report_dir)
+    videos = write_videos(cfg, cells, composed, report_dir) if cfg.video else []
     marl_eval, dropped = marl_eval_data(rows, b)
     marl_eval_left_out = sum(is_extra_run(r, b) for r in rows)
     target = check_target(rows, b)
@@ -466,11 +482,14 @@ def write_report(
             dropped,
             target,
             marl_eval_left_out,
+            videos,
         ),
     )
     for scenario, kinds in plots.items():
         for kind, path in kinds.items():
             written[f"{scenario}/{kind}"] = path
+    for video in videos:
+        written[f"{video.cell.scenario}/video_{video.cell.method}_{video.label}"] = video.path
     return written
 
 
