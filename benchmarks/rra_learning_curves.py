@@ -362,7 +362,7 @@ def learning_curve(cfg: RunConfig, eval_every: int, cache: dict | None = None, l
                     f"{stats.reward_mean:.4f} ({time.perf_counter() - began:.0f} s)"
                 )
         loop.rra.finish_stage()
-        loop.train_log.close()
+        loop.loggers.close()
     return {
         "warm_start": loop.position.get("warm_start"),
         "control_stages_shared": reused,

@@ -9,6 +9,8 @@ A restructuring that must not move results runs this before and after and compar
 Each fingerprint is a SHA-256 of the arrays a short seeded rollout produces (observations,
 rewards, terminations, infos' numbers), so any change of a bit shows. ``--skip-jocc`` leaves
 out the smoke JOCC run (about 20 s). Exit status 1 when ``--compare`` finds a difference.
+``--without KEY`` (repeatable) leaves every dict entry named KEY out of the hashes: a change
+that adds a metric compares the rest with the fingerprints from before it.
 """
 
 from __future__ import annotations
@@ -27,12 +29,23 @@ import torch
 SEED = 7
 STEPS_PER_SUBFRAME_ENV = 160  # three intervals and a bit
 STEPS_PER_INTERVAL_ENV = 12
+#: dict keys left out of every hash (``--without``)
+WITHOUT: set[str] = set()
+
+
+def _drop_keys(value):
+    """``value`` without the dict entries named in :data:`WITHOUT`, at any depth."""
+    if isinstance(value, dict):
+        return {k: _drop_keys(v) for k, v in value.items() if k not in WITHOUT}
+    if isinstance(value, list | tuple):
+        return type(value)(_drop_keys(v) for v in value)
+    return value
 
 
 def _numbers(value, out: list[np.ndarray]) -> None:
     """Append every number of a nested structure to ``out`` in a fixed order."""
     if isinstance(value, dict):
-        for key in sorted(value, key=str):
+        for key in sorted((k for k in value if k not in WITHOUT), key=str):
             out.append(np.frombuffer(str(key).encode(), dtype=np.uint8))
             _numbers(value[key], out)
     elif isinstance(value, list | tuple):
@@ -136,8 +149,13 @@ def smoke_jocc() -> dict[str, str]:
     metrics = {
         k: v for k, v in summary.items() if not any(t in k for t in timing + ("plots", "config"))
     }
+    metrics = _drop_keys(metrics)
     header = rows[0].split(",")
-    keep = [i for i, name in enumerate(header) if not any(t in name for t in timing)]
+    keep = [
+        i
+        for i, name in enumerate(header)
+        if not any(t in name for t in timing) and name not in WITHOUT
+    ]
     table = [[row.split(",")[i] for i in keep] for row in rows]
     return {"jocc/smoke": _hash([json.dumps(metrics, sort_keys=True, default=str), table])}
 
@@ -155,7 +173,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="write the fingerprints to this JSON file")
     parser.add_argument("--compare", type=Path, help="compare with fingerprints written before")
     parser.add_argument("--skip-jocc", action="store_true", help="leave out the smoke JOCC run")
+    parser.add_argument(
+        "--without",
+        action="append",
+        default=[],
+        metavar="KEY",
+        help="leave the dict entries named KEY out of every hash (repeatable)",
+    )
     args = parser.parse_args(argv)
+    WITHOUT.update(args.without)
     torch.set_num_threads(1)
     prints: dict[str, str] = {}
     for name, section in SECTIONS.items():

@@ -53,7 +53,7 @@ if os.environ.get("VDTN_MARL_FAKE_API"):
 
         def _fake(cfg, run_dir):
             run_dir = Path(run_dir)
-            log = MetricsLog(run_dir, tensorboard=False)
+            log = MetricsLog(run_dir)
             log.log({"iteration": 0, "kappa1": cfg.rra.kappa1})
             (run_dir / CHECKPOINT_DIR).mkdir(exist_ok=True)
             summary = {

@@ -220,6 +220,95 @@ def test_eval_of_a_checkpoint_without_trained_acting_policies_is_refused(
     assert cli.main(["eval", "checkpoint=run", *baselines]) == 0 and calls
 
 
+def test_eval_video_draws_every_interval_of_the_first_scenario_and_moves_no_result(
+    tmp_path, monkeypatch
+):
+    iio = pytest.importorskip("imageio.v3")
+    _make_run(tmp_path / "run", ["experiment=smoke", "progress=false"], "jocc", TRAINED)
+    monkeypatch.chdir(tmp_path)
+    common = ["eval", "checkpoint=run", "progress=false"]
+    assert cli.main([*common, "hydra.run.dir=plain"]) == 0
+    assert cli.main([*common, "hydra.run.dir=filmed", "video=true"]) == 0
+    plain, filmed = (
+        json.loads((tmp_path / d / "summary.json").read_text()) for d in ("plain", "filmed")
+    )
+    path = tmp_path / "filmed" / "episode.gif"
+    assert filmed["videos"] == {"episode": str(path.resolve())} and "videos" not in plain
+    frames = iio.imread(path, index=None)
+    assert frames.shape[0] == filmed["config"]["experiment"]["eval_intervals"] == 5
+    assert frames.shape[-1] in (3, 4) and frames.std() > 0
+    assert not list((tmp_path / "plain").glob("episode.*"))
+    for key in ("control_cost", "cam_delivery_rate", "aoi_ms_mean", "evoi"):
+        assert filmed[key] == plain[key], key
+
+
+def test_best_and_worst_scenarios_are_drawn_from_a_second_identical_run(tmp_path, monkeypatch):
+    """video_scenarios=best_worst: the scenarios of the highest and lowest control return of
+    the acting system, each drawn as scenario 0 of a one-scenario view of the batch."""
+    import torch
+
+    from vdtn_marl.experiment import evaluate as evaluate_module
+    from vdtn_marl.experiment.jocc import JointOptimisation
+
+    iio = pytest.importorskip("imageio.v3")
+    data = _make_run(tmp_path / "run", ["experiment=smoke", "experiment.eval_episodes=4"],
+                     "jocc", TRAINED)  # fmt: skip
+    from vdtn_marl.envs import render
+
+    drawn, indices = [], []
+    real_render, real_twin = evaluate_module._render, render.render_twin
+
+    def spy_index(twin, record, index, batch):
+        indices.append(index)
+        return real_render(twin, record, index, batch)
+
+    def spy(twin, record=None):  # what the renderer sees as its scenario 0
+        drawn.append((int(twin.interval[0]), twin.platoon.position_m[0].clone()))
+        return real_twin(twin, record)
+
+    monkeypatch.setattr(evaluate_module, "_render", spy_index)
+    monkeypatch.setattr(render, "render_twin", spy)
+    loop = JointOptimisation.from_checkpoint(tmp_path / "run/checkpoints/last.pt", tmp_path / "e")
+    loop.cfg.video, loop.cfg.video_scenarios = True, "best_worst"
+    loop.evaluate()
+    returns = loop._last_results[1].returns
+    best, worst = int(returns.argmax()), int(returns.argmin())
+    assert best != worst and sorted(loop.videos) == ["episode_best", "episode_worst"]
+    intervals = data["experiment"]["eval_intervals"]
+    assert indices == [best, worst] * intervals
+    # what the view shows is that scenario's state: the twin's own row, not row 0
+    twin_rows = {}
+
+    def rows(twin, record):
+        twin_rows.setdefault(int(twin.interval[0]), twin.platoon.position_m.clone())
+
+    from vdtn_marl.algos.evaluate import evaluate_system
+
+    params = loop.params
+    acting = loop.control_policy(), loop.rra_policy()
+    evaluate_system(
+        params, *acting, perfect=False, episodes=4, intervals=intervals,
+        seed=evaluate_module.EVAL_SEED_OFFSET + loop.cfg.seed, gamma=loop.cfg.algo.gamma,
+        device=loop.device, trace_source=loop.eval_traces, ivoi_estimator=loop.estimator,
+        completion=loop.completion, on_interval=rows,
+    )  # fmt: skip
+    for index, (interval, position) in zip(indices, drawn, strict=True):
+        torch.testing.assert_close(position, twin_rows[interval][index])
+    frames = iio.imread(loop.videos["episode_best"], index=None)
+    assert frames.shape[0] == intervals
+
+
+def test_eval_video_without_its_library_is_one_line(tmp_path, monkeypatch, capsys):
+    from vdtn_marl.io import video
+
+    _make_run(tmp_path / "run", ["experiment=smoke"], "jocc", TRAINED)
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(video, "installed", lambda module: module != "imageio_ffmpeg")
+    assert cli.main(["eval", "checkpoint=run", "video=true", "video_format=mp4"]) == 2
+    _one_line(capsys.readouterr().err, "video_format=mp4", "pip install 'vdtn-marl[video]'")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["run"]
+
+
 # --- 3. a run folder is never overwritten ---------------------------------------------------
 
 

@@ -11,6 +11,7 @@ import re
 import subprocess
 import sys
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -33,6 +34,7 @@ PLOT_KINDS = (
     "v2i_throughput",
     "cam_delivery",
     "control_cost",
+    "aoi",
     "cam_latency_cdf",
     "pareto_kappa1",
     "training_curves",
@@ -373,7 +375,7 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 def test_shipped_benchmarks_plan_their_grid():
     shipped = (
-        ("smoke", 12), ("reduced", 185), ("leaderboard", 165), ("sensitivity", 25),
+        ("smoke", 14), ("reduced", 185), ("leaderboard", 180), ("sensitivity", 25),
         ("headline", 20), ("value_fit", 15),
     )  # fmt: skip
     for name, cells in shipped:
@@ -410,7 +412,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
         assert "experiment.rra_iterations=16" in b.budgets[method], method
     assert not {"random", "round_robin", "greedy", "oracle"} & set(b.budgets)
     smoke = cli_help.read_conf_yaml("benchmark", "smoke.yaml")
-    assert smoke["version"] == "2.0" and smoke["experiment"] == "smoke"
+    assert smoke["version"] == "2.1" and smoke["experiment"] == "smoke"
     assert not any("jocc_iterations" in str(o) for o in smoke.get("budgets", {}).values())
     sens = cli_help.read_conf_yaml("benchmark", "sensitivity.yaml")
     assert (sens["version"], sens["scenarios"]) == ("1.0", ["platoon4_noise90"])
@@ -554,6 +556,19 @@ def test_finished_cell_with_another_config_is_an_error(tmp_path):
     assert leaderboard.complete_summary(tmp_path, data) is None
 
 
+def test_a_cell_finished_before_aoi_was_reported_stays_finished(tmp_path):
+    """A summary without the metrics that came later (AoI) is a finished cell: resuming a
+    benchmark does not run it again, and its runs are left out of those columns only."""
+    assert set(leaderboard.AOI_KEYS) <= set(leaderboard.METRIC_KEYS)
+    data = {"seed": 0, "experiment": {"jocc_iterations": 1}}
+    summary = {k: 0.0 for k in leaderboard.METRIC_KEYS if k not in leaderboard.AOI_KEYS}
+    summary.update(iterations=1, config=data)
+    (tmp_path / "summary.json").write_text(json.dumps(summary))
+    assert leaderboard.complete_summary(tmp_path, data) is not None
+    stat = leaderboard.aggregate([summary.get("aoi_ms_mean")] * 3)
+    assert stat["n"] == 0 and stat["mean"] is None
+
+
 # --- the smoke benchmark end to end ---------------------------------------------------------
 
 
@@ -577,7 +592,11 @@ def smoke(tmp_path_factory):
         out_dir=str(out),
         report_dir=str(report),
     )
-    return {"out": out, "report": report, "result": result, "cfg": cfg, "args": args, "cwd": base}
+    cells = len(cfg.benchmark.methods) * len(cfg.benchmark.seeds)
+    return {
+        "out": out, "report": report, "result": result, "cfg": cfg, "args": args, "cwd": base,
+        "cells": cells,
+    }  # fmt: skip
 
 
 def _strict_json(path: Path):
@@ -593,7 +612,7 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
     b = cfg.benchmark
     assert (data["benchmark"], data["version"]) == (b.name, b.version)
     assert data["command"].startswith("vdtn-marl bench benchmark=smoke")
-    assert data["cells"] == {"total": 12, "complete": 12}
+    assert data["cells"] == {"total": smoke["cells"], "complete": smoke["cells"]}
     assert list(data["statistics"]) == b.scenarios
     for scenario, by_method in data["statistics"].items():
         assert list(by_method) == list(b.methods)
@@ -603,8 +622,8 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
             delivering = sum(r["cam_delivery_rate"] > 0 for r in runs)
             for key, stat in metrics.items():
                 assert set(stat) == set(leaderboard.STAT_KEYS)
-                # latency is undefined (null) for a run that delivered no CAM
-                expected = delivering if key in leaderboard.CAM_LATENCY_KEYS else len(b.seeds)
+                # latency and peak AoI are undefined (null) for a run that delivered no CAM
+                expected = delivering if key in leaderboard.NO_DELIVERY_KEYS else len(b.seeds)
                 assert stat["n"] == expected, (method, key)
                 if expected == 0:
                     assert stat["mean"] is None
@@ -620,7 +639,7 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
     assert (method_info["interval_method"], method_info["iqm_interval_method"]) == ("t", "bca")
     assert method_info["interval"].startswith("95% Student-t CI")
     runs = data["runs"]
-    assert len(runs) == 12
+    assert len(runs) == smoke["cells"]
     assert {r["version"] for r in runs} == {b.version}
     for run in runs:
         for key in ("control_cost", "gap_error_abs_m", "v2i_throughput_mbps_per_link", "evoi"):
@@ -649,7 +668,7 @@ def test_smoke_writes_marl_eval_json_and_csv(smoke):
     assert len(rows) == len(b.scenarios) * len(b.methods) * len(leaderboard.METRICS)
     assert {r["version"] for r in rows} == {b.version}
     with open(smoke["report"] / leaderboard.RUNS_CSV, newline="", encoding="utf-8") as handle:
-        assert len(list(csv.DictReader(handle))) == 12
+        assert len(list(csv.DictReader(handle))) == smoke["cells"]
 
 
 def test_smoke_writes_markdown_and_plots(smoke):
@@ -669,6 +688,7 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert "training and evaluation drives come from different vehicles" in text
     for method in b.methods:
         assert f"| {method} |" in text
+    assert "AoI mean (ms) ↓" in text and "peak AoI (ms) ↓" in text
     for kind in PLOT_KINDS:
         path = smoke["report"] / f"leaderboard_platoon4_{kind}.png"
         assert path.is_file(), kind
@@ -680,10 +700,35 @@ def test_smoke_writes_markdown_and_plots(smoke):
         assert (cell / name).is_file(), name
 
 
+def test_smoke_videos_show_the_trace_methods_best_and_worst_held_out_scenario(smoke, tmp_path):
+    """video=true: per scenario and trace method, the first seed's run evaluated again on the
+    same held-out scenarios; its best and worst scenario (by the acting system's control
+    return, as the cell's own evaluation_raw.npz has them) as GIFs of one frame per interval."""
+    iio = pytest.importorskip("imageio.v3")
+    import numpy as np
+
+    cfg = replace(smoke["cfg"], run=False, video=True, report_dir=str(tmp_path), progress=False)
+    leaderboard.run_benchmark(cfg, command="test")
+    b = cfg.benchmark
+    text = (tmp_path / leaderboard.REPORT_FILE).read_text(encoding="utf-8")
+    intervals = cli_help.read_conf_yaml("experiment", "smoke.yaml")["experiment"]["eval_intervals"]
+    for scenario in b.scenarios:
+        for method in b.trace_methods:
+            seed = min(b.seeds)
+            raw = np.load(smoke["out"] / scenario / method / f"seed{seed}" / "evaluation_raw.npz")
+            expected = {"best": int(raw["returns"].argmax()), "worst": int(raw["returns"].argmin())}
+            assert expected["best"] != expected["worst"]
+            for label, index in expected.items():
+                name = f"leaderboard_{scenario}_{method}_{label}.gif"
+                assert iio.imread(tmp_path / name, index=None).shape[0] == intervals
+                assert f"[{method} seed {seed} {label} (scenario {index})]({name})" in text
+    assert not list(tmp_path.glob("*.tmp*")) and not list(smoke["report"].glob("*.gif"))
+
+
 def test_smoke_resume_skips_finished_cells(smoke):
     cfg = smoke["cfg"]
     summaries = sorted(smoke["out"].rglob("summary.json"))
-    assert len(summaries) == 12
+    assert len(summaries) == smoke["cells"]
     before = {p: p.stat().st_mtime_ns for p in summaries}
     redo = smoke["out"] / "platoon4" / "greedy" / "seed1" / "summary.json"
     redo.unlink()
@@ -700,7 +745,7 @@ def test_smoke_resume_skips_finished_cells(smoke):
     cfg.cells = []
     result = leaderboard.run_benchmark(cfg, command="test")
     assert not result.ran
-    assert len(result.done) == 12 and not result.failed and not result.pending
+    assert len(result.done) == smoke["cells"] and not result.failed and not result.pending
     # run=false: nothing runs, the missing cell stays missing, the report is written
     redo.unlink()
     cfg.run = False
@@ -718,7 +763,7 @@ def test_smoke_resume_skips_finished_cells(smoke):
     # and through the CLI: nothing left to run
     again = _run_cli(*smoke["args"], cwd=smoke["cwd"])
     assert again.returncode == 0, again.stderr[-3000:]
-    assert "0 cell(s) run now, 12 already complete" in again.stdout
+    assert f"0 cell(s) run now, {smoke['cells']} already complete" in again.stdout
 
 
 def test_script_forwards_to_the_cli():

@@ -457,6 +457,29 @@ def test_jocc_hands_the_configured_ivoi_baseline_to_the_rra_environment(tmp_path
     assert loop.ivoi_estimator("rollout").baseline == "optimal"  # the default
 
 
+def test_jocc_trains_the_rra_agents_on_minus_the_age_of_information(tmp_path):
+    """rra=aoi with κ1 = 0: every subframe the trainer's reward is −s_A·A, A = s ms where the
+    link's CAM has arrived by subframe s and a·Δt + s ms where it is still pending, read back
+    from the RRA observation (time left, the held content's age a in intervals, the bits left
+    after the subframe); then one PPO iteration of the same trainer as every RRA reward."""
+    rra = RRAConfig(name="aoi", kappa1=0.0, aoi_scale=0.01)
+    loop = JointOptimisation(tiny_config(rra=rra), tmp_path)
+    batch = loop.rra.collect(0)
+    lay = loop.rra.env.twin.rra_layout
+    t = loop.params.platoon.subframes_per_interval
+    obs, nxt = batch["rra", "observation"], batch["next", "rra", "observation"]
+    reward = batch["next", "rra", "reward"][..., 0]
+    s = torch.round(t * (1.0 - obs[..., lay.time_left])) + 1.0  # subframes run, 1..T
+    age = obs[..., lay["cam_age"]][..., 0]
+    pending = nxt[..., lay.bits_left] > 0
+    keep = (s < t) & (age < 10.0)  # the next observation is the same interval's; age unclipped
+    expected = -0.01 * (s + age * 50.0 * pending)
+    assert keep.sum() > 100 and pending[keep].any() and (~pending[keep]).any()
+    torch.testing.assert_close(reward[keep], expected[keep], rtol=1e-5, atol=1e-6)
+    stats = loop.rra.train_iteration()
+    assert loop.rra.iteration == 1 and math.isfinite(stats.reward_mean) and stats.reward_mean < 0
+
+
 def test_rra_observation_scaling_keeps_mid_episode_control_errors_in_range(tmp_path):
     """The RRA scaler is fitted on a rollout of a few subframes; from a reset alone the
     followers' control errors in the RRA observation barely move there, and their scaled

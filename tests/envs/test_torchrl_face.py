@@ -8,6 +8,7 @@ import torch
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
+from vdtn_marl.core.reward import REWARD_KINDS
 from vdtn_marl.envs.control import PlatoonControlEnv
 from vdtn_marl.envs.radio import V2XRRAEnv
 from vdtn_marl.envs.torchrl import MODES, VDTNTorchRLEnv
@@ -195,8 +196,9 @@ def test_joint_matches_pettingzoo():
     assert _run_two_timescale(pz, env, vehicles=True, intervals=3) == 3
 
 
-def test_rra_matches_pettingzoo():
-    seed, kwargs = 9, {"episode_intervals": 2, "reward": "drra", "kappa1": 0.3}
+@pytest.mark.parametrize("reward", REWARD_KINDS)
+def test_rra_matches_pettingzoo(reward):
+    seed, kwargs = 9, {"episode_intervals": 2, "reward": reward, "kappa1": 0.3}
     pz = V2XRRAEnv(seed=seed, **kwargs)
     env = VDTNTorchRLEnv(mode="rra", seed=seed, **kwargs)
     _run_two_timescale(pz, env, vehicles=False, intervals=2)

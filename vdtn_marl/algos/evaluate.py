@@ -21,6 +21,7 @@ from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.io.interrupts import check_interrupt
 from vdtn_marl.policies.rra import RandomRRAPolicy
+from vdtn_marl.sim.aoi import interval_age_ms
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import IVoIEstimator
@@ -64,6 +65,10 @@ METRIC_DOC = {
     "cam_latency_ms_mean": "mean latency of delivered CAMs (ms)",
     "cam_latency_ms_p50": "median latency of delivered CAMs (ms)",
     "cam_latency_ms_p95": "95th percentile latency of delivered CAMs (ms)",
+    "aoi_ms_mean": "Age of Information of the CAM content at each recipient, averaged over every "
+    "subframe (ms; docs/model.md §4.8)",
+    "peak_aoi_ms_mean": "peak Age of Information, the age just before each refresh (a delivered "
+    "CAM), averaged over refreshes (ms)",
     "v2i_throughput_mbps_per_link": "mean V2I rate per V2I link (Mbps)",
     "ivoi_mean_delivered": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was "
     "delivered within its interval",
@@ -127,6 +132,7 @@ def evaluate_system(
     ivoi_estimator: IVoIEstimator | None = None,
     record_traces: bool = False,
     completion=None,
+    on_interval: Callable | None = None,
 ) -> EvalResult:
     """Run ``episodes`` scenarios for ``intervals`` intervals; see the module doc.
 
@@ -134,7 +140,8 @@ def evaluate_system(
     is given, in which case the radio runs for its metrics but the followers still observe
     perfectly. With ``perfect=False`` the radio runs with ``rra`` (default: uniformly random)
     and ``completion`` (a completer of :mod:`vdtn_marl.sim.completion`) fills in stale CAM
-    content before the control policy sees it.
+    content before the control policy sees it. ``on_interval(twin, record)`` is called after
+    every interval (to draw it, for instance); it must not change the twin.
     """
     if intervals > params.episode_intervals:
         raise ValueError(
@@ -167,6 +174,8 @@ def evaluate_system(
     v2i_sum = torch.zeros((), dtype=torch.float64, device=dev)
     cams_sent = torch.zeros((), dtype=torch.float64, device=dev)
     cams_delivered = torch.zeros((), dtype=torch.float64, device=dev)
+    aoi_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    peak_aoi_sum = torch.zeros((), dtype=torch.float64, device=dev)
     by_delivery = radio and ivoi_estimator is not None  # ξ split by CAM delivery
     xi_delivered = _MaskedMean(b, dev)
     xi_lost = _MaskedMean(b, dev)
@@ -191,6 +200,8 @@ def evaluate_system(
         check_interrupt()  # Ctrl-C stops here, between intervals (vdtn_marl.io.interrupts)
         if k > 0:
             engine.advance()  # every scenario (a collided one is no longer counted)
+        if radio:  # a_k: age (intervals) at kΔt of the content each recipient holds, [B, L]
+            held_age = twin.interval[:, None] - twin.cam_held_interval
         closed = engine.close()
         record = closed.record
         live = alive[:, None].double()
@@ -213,9 +224,14 @@ def evaluate_system(
             cams_sent += alive.double().sum() * delay.shape[-1]
             cams_delivered += delivered.double().sum()
             latencies.append(delay[delivered].double() * subframe_ms)
+            aoi_mean, peak_aoi = interval_age_ms(held_age, delay, t, subframe_ms)
+            aoi_sum += (live * aoi_mean.double()).sum()
+            peak_aoi_sum += peak_aoi.double()[delivered].sum()
             if xi is not None:
                 xi_delivered.add(xi, delivered)
                 xi_lost.add(xi, ~in_time & alive[:, None])
+        if on_interval is not None:
+            on_interval(twin, record)
         if record_traces:
             gap_trace.append(record.gap_error_m[0].abs().cpu())
             speed_trace.append(record.speed_error_mps[0].abs().cpu())
@@ -245,6 +261,10 @@ def evaluate_system(
                 cam_latency_ms_p50=float("nan"),
                 cam_latency_ms_p95=float("nan"),
             )
+        metrics["aoi_ms_mean"] = float(aoi_sum / cams_sent)
+        metrics["peak_aoi_ms_mean"] = (
+            float(peak_aoi_sum / cams_delivered) if cams_delivered > 0 else float("nan")
+        )
         metrics["v2i_throughput_mbps_per_link"] = float(v2i_sum / live_intervals / 1e6)
         if by_delivery:
             metrics["ivoi_mean_delivered"] = xi_delivered.pooled()

@@ -256,6 +256,7 @@ _OUTPUTS = {
     "eval": [
         "  config.yaml (the run's config with your overrides), evaluation.csv, summary.json",
         "  (with `warnings` naming policies the checkpoint never trained), eval.log, .hydra/",
+        "  video=true: episode.gif (video_format=mp4: episode.mp4) of the first scenario",
     ],
 }
 
@@ -291,7 +292,8 @@ def bench_help() -> str:
         "IQM with a bootstrap CI from 10 seeds) into LEADERBOARD.md, leaderboard.json,",
         "leaderboard_marl_eval.json (marl-eval raw data), leaderboard.csv and PNG plots in",
         "REPORT_DIR. Cells with a complete summary.json are skipped: rerun the same command to",
-        "resume. `--cfg job` shows the benchmark.",
+        "resume. `--cfg job` shows the benchmark. video=true adds GIFs (video_format=mp4: MP4s)",
+        "of the two trace methods on their best and worst held-out scenario.",
         "",
         "bench summarize: collect every job of a finished sweep (its summary.json, config.yaml",
         "and .hydra/overrides.yaml) into one table, printed and written as SWEEP_DIR/summary.csv,",

@@ -16,7 +16,8 @@ engine holds the twin and what acts around it, all optional:
 - ``ivoi_estimator``: ξ at each interval's end (an object with ``__call__(twin, record)`` and
   optionally ``needs_command_if_lost``, :mod:`vdtn_marl.voi`);
 - ``reward_fn``: the RRA reward (``per_subframe(outcome, bandwidth_hz, subframe_s)`` and
-  ``at_interval_end(xi, lost)``, :class:`vdtn_marl.core.reward.RRAReward`).
+  ``at_interval_end(xi, lost)``, :class:`vdtn_marl.core.reward.RRAReward`); one whose
+  ``uses_aoi`` is true also gets ``cam_age_ms=``, the recipients' Age of Information.
 
 The engine is backend-agnostic: it hands the twin what its backend takes (torch tensors, or
 what a policy returns on the NumPy backend) and never converts the state. Masks are bool
@@ -185,7 +186,11 @@ class IntervalEngine:
     def subframe_reward(self, outcome):
         """The reward function's (RRA reward [B, L], V2I throughput [B] in Mbps) of a
         subframe's ``outcome``."""
-        return self.reward_fn.per_subframe(outcome, self._bandwidth_hz, self._subframe_s)
+        reward_fn, bandwidth_hz, subframe_s = self.reward_fn, self._bandwidth_hz, self._subframe_s
+        if getattr(reward_fn, "uses_aoi", False):
+            age_ms = self.twin.cam_age_ms()
+            return reward_fn.per_subframe(outcome, bandwidth_hz, subframe_s, cam_age_ms=age_ms)
+        return reward_fn.per_subframe(outcome, bandwidth_hz, subframe_s)
 
     # ------------------------------------------------------------------ observe and act
     def observe(self, mask: torch.Tensor | None = None, cams_lost: bool = False) -> torch.Tensor:

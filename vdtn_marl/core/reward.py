@@ -1,4 +1,4 @@
-"""RRA rewards: ``jocc``, ``drra`` and ``throughput`` (docs/model.md §5).
+"""RRA rewards: ``jocc``, ``drra``, ``aoi`` and ``throughput`` (docs/model.md §5).
 
 Per subframe every RRA agent gets κ1·s_g·g with g = Σ_m V2I rate (Mbps), shared (cooperative).
 - ``jocc``: at the last subframe of each interval ``rra_i`` also gets κ2·s_ξ·ξ_i, the IVoI of
@@ -6,9 +6,13 @@ Per subframe every RRA agent gets κ1·s_g·g with g = Σ_m V2I rate (Mbps), sha
 - ``drra`` (delay-aware baseline): every subframe κ2·progress_i, where progress_i is link i's
   spectral efficiency log2(1 + SINR)/10 while its CAM is pending and 1 once delivered (Liang et
   al.'s V2V reward), and at the last subframe −κ2·miss_penalty if the CAM missed its interval.
+- ``aoi`` (AoI-aware baseline, the peers' objective: Parvini et al., IEEE TVT 2023): every
+  subframe −κ2·s_A·A_i, where A_i is the Age of Information (ms) of the CAM content the
+  recipient of link i holds at the end of the subframe (docs/model.md §4.8; the twin computes
+  it from what the recipient holds, :meth:`~vdtn_marl.sim.twin.DigitalTwin.cam_age_ms`).
 - ``throughput``: only the V2I term.
-The scale factors s_g (``throughput_scale``, per Mbps) and s_ξ (``ivoi_scale``) are config
-values reported with results.
+The scale factors s_g (``throughput_scale``, per Mbps), s_ξ (``ivoi_scale``) and s_A
+(``aoi_scale``, per ms) are config values reported with results.
 
 :class:`RRAReward`'s fields are the one home of the rewards' defaults (the config schema reads
 them), and this module imports neither torch nor the twin: the rewards are arithmetic on the
@@ -31,7 +35,7 @@ if TYPE_CHECKING:
 
     from vdtn_marl.sim.link import SubframeOutcome
 
-REWARD_KINDS = ("jocc", "drra", "throughput")
+REWARD_KINDS = ("jocc", "drra", "aoi", "throughput")
 KAPPA_SUM_ABS_TOL = 1e-6
 """How far κ1 + κ2 may be from 1 (rounding of typed decimals); the one tolerance used by the
 config validation and the environments."""
@@ -61,6 +65,9 @@ class RRAReward:
     throughput_scale: float = 0.004
     ivoi_scale: float = 20.0
     miss_penalty: float = 1.0
+    #: s_A per ms of AoI: 1/Δt, so an age of one control interval (50 ms) costs 1 per subframe,
+    #: the scale of the ``drra`` progress term and miss penalty
+    aoi_scale: float = 0.02
 
     def __post_init__(self):
         if self.kind not in REWARD_KINDS:
@@ -68,7 +75,7 @@ class RRAReward:
         k1, k2 = check_kappa(self.kappa1, self.kappa2)
         object.__setattr__(self, "kappa1", k1)
         object.__setattr__(self, "kappa2", k2)
-        for name in ("throughput_scale", "ivoi_scale", "miss_penalty"):
+        for name in ("throughput_scale", "ivoi_scale", "miss_penalty", "aoi_scale"):
             value = getattr(self, name)
             if not (isinstance(value, int | float) and 0.0 <= value < float("inf")):
                 raise ConfigError(f"{name}={value!r} is outside the allowed range [0, inf)")
@@ -77,13 +84,21 @@ class RRAReward:
     def uses_ivoi(self) -> bool:
         return self.kind == "jocc" and self.kappa2 > 0
 
+    @property
+    def uses_aoi(self) -> bool:
+        """Whether :meth:`per_subframe` needs the recipients' AoI (``cam_age_ms``)."""
+        return self.kind == "aoi" and self.kappa2 > 0
+
     def v2i_throughput_mbps(self, outcome: SubframeOutcome):
         """g = Σ_m V2I rate in Mbps, [B]."""
         return outcome.v2i_rate_bps.sum(axis=-1) * 1e-6
 
-    def per_subframe(self, outcome: SubframeOutcome, bandwidth_hz: float, subframe_s: float):
+    def per_subframe(
+        self, outcome: SubframeOutcome, bandwidth_hz: float, subframe_s: float, cam_age_ms=None
+    ):
         """Reward of every RRA agent for this subframe [B, L], and g (Mbps) [B], on the
-        outcome's backend (NumPy arrays or torch tensors)."""
+        outcome's backend (NumPy arrays or torch tensors). ``cam_age_ms`` [B, L]: the AoI of
+        each link's recipient at the end of the subframe, needed when :attr:`uses_aoi`."""
         bits = outcome.v2v_bits
         numpy = isinstance(bits, np.ndarray)
         g = self.v2i_throughput_mbps(outcome)
@@ -97,6 +112,10 @@ class RRAReward:
             else:
                 progress = (efficiency / 10.0).masked_fill(done, 1.0)
             reward = reward + self.kappa2 * progress
+        elif self.uses_aoi:
+            if cam_age_ms is None:
+                raise ValueError("reward='aoi' needs cam_age_ms, the recipients' AoI [B, L]")
+            reward = reward - (self.kappa2 * self.aoi_scale) * cam_age_ms
         return reward, g
 
     def at_interval_end(self, ivoi: torch.Tensor, cam_lost: torch.Tensor) -> torch.Tensor:

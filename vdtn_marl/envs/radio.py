@@ -2,8 +2,9 @@
 
 Agents ``rra_1..rra_{N−1}``: the base station's allocator of each V2V link, acting every 1 ms
 subframe. The control side runs inside with a given control module (impaired observations →
-commands; linear CACC by default) and the reward is ``jocc``, ``drra`` or ``throughput``
-(docs/model.md §5). It is :class:`~vdtn_marl.envs.two_timescale.TwoTimescaleEnv` with the
+commands; linear CACC by default) and the reward is one of
+:data:`~vdtn_marl.core.reward.REWARD_KINDS` (``jocc``, ``drra``, ``aoi``, ``throughput``;
+docs/model.md §5). It is :class:`~vdtn_marl.envs.two_timescale.TwoTimescaleEnv` with the
 vehicles driven internally, so the two share every line of stepping logic.
 
 Observation of ``rra_i``: Box(4M + 6) float32 — own-link SNR at maximum power per sub-channel,

@@ -84,8 +84,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             (default: uniformly random).
         control_module: ``"rra"`` only: impaired vehicle observations [B, F, 8] → commands
             [B, F] (default: linear CACC).
-        reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty: the RRA reward
-            (:class:`~vdtn_marl.core.reward.RRAReward`), ``"rra"``/``"joint"`` only.
+        reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty, aoi_scale: the RRA
+            reward (:class:`~vdtn_marl.core.reward.RRAReward`), ``"rra"``/``"joint"`` only.
         ivoi_estimator, ivoi_horizon_intervals: the VoI estimator (:mod:`vdtn_marl.voi`).
         trace_source: leader trace set (default: the model's ``traces``).
         completion, completion_predictor: completion of stale CAM content in the impaired
@@ -125,6 +125,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         throughput_scale: float = RRAReward.throughput_scale,
         ivoi_scale: float = RRAReward.ivoi_scale,
         miss_penalty: float = RRAReward.miss_penalty,
+        aoi_scale: float = RRAReward.aoi_scale,
         trace_source: str | TraceSource | None = None,
         completion="none",
         completion_predictor=None,
@@ -179,7 +180,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         reward_fn = estimator = None
         if self.has_rra:
             reward_fn = RRAReward(
-                reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty
+                reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty, aoi_scale
             )
             estimator = paid_ivoi_estimator(reward_fn, ivoi_estimator, ivoi_horizon_intervals)
         check_estimator_has_control(

@@ -75,6 +75,7 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         throughput_scale: float = RRAReward.throughput_scale,
         ivoi_scale: float = RRAReward.ivoi_scale,
         miss_penalty: float = RRAReward.miss_penalty,
+        aoi_scale: float = RRAReward.aoi_scale,
         vehicles_are_agents: bool = True,
         control_module: Callable | None = None,
         seed: int | None = None,
@@ -84,7 +85,9 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         completion_predictor=None,
         **model_kwargs,
     ):
-        reward_fn = RRAReward(reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty)
+        reward_fn = RRAReward(
+            reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty, aoi_scale
+        )
         super().__init__(
             radio=True, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )

@@ -108,6 +108,7 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
     summary["task"] = "eval"
     summary["warnings"] = warnings
     atomic_write_json(Path(run_dir) / SUMMARY_FILE, summary)
+    loop.loggers.close()
     _log.info(
         "eval done in %.1f s: %s", time.perf_counter() - began,
         metrics_line(summary, TABLE_METRICS),

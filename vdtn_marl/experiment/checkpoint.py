@@ -118,9 +118,10 @@ def resume(loop: CheckpointedLoop) -> bool:
     set_rng_state(saved["rng"])
     rows = saved["log_rows"]
     check_summary_file(loop.run_dir)
-    train_log = MetricsLog.resume(loop.run_dir, expected_rows=rows["train"])
+    loggers = loop.train_log.loggers
+    train_log = MetricsLog.resume(loop.run_dir, expected_rows=rows["train"], loggers=loggers)
     eval_log = MetricsLog.resume(
-        loop.run_dir, tensorboard=False, filename=EVALUATION_FILE, expected_rows=rows["eval"]
+        loop.run_dir, filename=EVALUATION_FILE, expected_rows=rows["eval"], loggers=loggers
     )
     remove_stale_temp_files(loop.run_dir)  # of a writer killed mid-write
     loop.train_log, loop.eval_log = train_log, eval_log

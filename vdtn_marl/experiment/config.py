@@ -19,6 +19,8 @@ from vdtn_marl.algos.params import AlgoConfig
 from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
+from vdtn_marl.io.loggers import DEFAULT_LOGGERS, check_loggers
+from vdtn_marl.io.video import VIDEO_FORMATS, VIDEO_SCENARIOS, check_video
 from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, SCENARIOS, scenario_params
 from vdtn_marl.sim.params import TwinParams
@@ -126,6 +128,7 @@ class RRAConfig:
     throughput_scale: float = RRAReward.throughput_scale  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = RRAReward.ivoi_scale  # multiplies ξ before κ2
     miss_penalty: float = RRAReward.miss_penalty  # drra: penalty of a CAM that misses its interval
+    aoi_scale: float = RRAReward.aoi_scale  # aoi: reward units per ms of Age of Information
 
     @property
     def learned(self) -> bool:
@@ -147,6 +150,9 @@ class ExperimentConfig:
     eval_episodes: int = 16  # scenarios evaluated (one batch)
     eval_intervals: int = 200  # control intervals per evaluation episode
     checkpoint_every: int = 10  # iterations between checkpoints (0: only at the end)
+    # where the metrics go besides metrics.csv and evaluation.csv (always written, the source
+    # of plots): csv, tensorboard, wandb, mlflow (TorchRL's loggers; vdtn_marl/io/loggers.py)
+    loggers: list[str] = field(default_factory=lambda: list(DEFAULT_LOGGERS))
 
 
 @dataclass
@@ -168,6 +174,13 @@ class RunConfig:
     # a directory where π*'s warm start is memoised and shared by the runs that would compute
     # the same one (vdtn_marl/experiment/warm_start.py); results do not depend on it
     warm_start_cache: str | None = None
+    # each evaluation also writes held-out scenarios as videos, one frame per control
+    # interval (<run>/episode.gif or .mp4; needs vdtn-marl[video]; vdtn_marl/io/video.py)
+    video: bool = False
+    video_format: str = "gif"  # gif or mp4
+    # which held-out scenarios: first (episode.<format>) or best_worst (the highest and lowest
+    # control return: episode_best and episode_worst, by a second run of the evaluation)
+    video_scenarios: str = "first"
 
     def twin_params(self) -> TwinParams:
         """The model of the run, with its scenario's topology."""
@@ -251,6 +264,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("rra.throughput_scale", r.throughput_scale, 0.0, 1e6)
     _real("rra.ivoi_scale", r.ivoi_scale, 0.0, 1e6)
     _real("rra.miss_penalty", r.miss_penalty, 0.0, 1e6)
+    _real("rra.aoi_scale", r.aoi_scale, 0.0, 1e6)
     for key in (
         "depth",
         "num_cells",
@@ -288,6 +302,13 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive_int(f"experiment.{key}", getattr(e, key), low=0)
     _positive_int("seed", cfg.seed, low=0, high=2**63 - 1)
     _positive_int("threads", cfg.threads, low=0, high=1024)
+    check_loggers(e.loggers, "experiment.loggers")  # names, and the extra of a missing one
+    if not isinstance(cfg.video, bool):
+        raise ConfigError(f"video={cfg.video!r} must be true or false")
+    _choice("video_format", cfg.video_format, tuple(VIDEO_FORMATS))
+    _choice("video_scenarios", cfg.video_scenarios, tuple(VIDEO_SCENARIOS))
+    if cfg.video:
+        check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
     _choice("scenario.kind", s.kind, tuple(SCENARIOS))
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)
@@ -472,6 +493,8 @@ class BenchConfig:
     ``run=false`` runs no cell and only writes the report of the complete ones.
     ``share_warm_starts`` lets the cells that would compute the same warm start of π* share it
     through ``<out_dir>/warm_starts`` (``warm_start_cache``; the results do not change).
+    ``video`` adds videos of the two ``trace_methods`` on their best and worst held-out scenario
+    to the report (:mod:`vdtn_marl.leaderboard.videos`).
     """
 
     benchmark: BenchmarkConfig = field(default_factory=BenchmarkConfig)
@@ -485,6 +508,10 @@ class BenchConfig:
     device: str = "cpu"
     progress: bool = True
     share_warm_starts: bool = True
+    # the report also writes videos of the trace methods on their best and worst held-out
+    # scenario (vdtn_marl/leaderboard/videos.py; needs vdtn-marl[video])
+    video: bool = False
+    video_format: str = "gif"  # gif or mp4
 
 
 #: Keys a benchmark sets itself in every cell; a method or budget may not set them.
@@ -508,6 +535,11 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
     b = cfg.benchmark
     if not b.version:
         raise ConfigError("benchmark.version='' must name the benchmark's version, e.g. '0.1'")
+    if not isinstance(cfg.video, bool):
+        raise ConfigError(f"video={cfg.video!r} must be true or false")
+    _choice("video_format", cfg.video_format, tuple(VIDEO_FORMATS))
+    if cfg.video:
+        check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
     if not re.fullmatch(_NAME_PATTERN, b.name):
         raise ConfigError(
             f"benchmark.name={b.name!r} must be a plain name (letters, digits, _ . + -)"

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import torch
@@ -24,6 +24,7 @@ from vdtn_marl import __version__
 from vdtn_marl.algos.evaluate import EvalResult, evaluate_system
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.experiment.config import RunConfig, to_dict
+from vdtn_marl.io.video import VIDEO_SCENARIOS
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.voi import expected_voi, mean_ci
@@ -58,11 +59,52 @@ class ActingSystem:
 @dataclass
 class Evaluation:
     """One ``evaluate`` stage: the row of ``evaluation.csv`` and the results behind it
-    (``acting`` is None when π* was scored against the CACC)."""
+    (``acting`` is None when π* was scored against the CACC), and with a ``video`` the frames
+    of the scenarios it drew, one per control interval, by video stem (the acting system's;
+    π*'s when there is none); ``drawn`` the scenario index of each stem."""
 
     row: dict[str, Any]
     optimal: EvalResult
     acting: EvalResult | None
+    frames: dict[str, list] = field(default_factory=dict)
+    drawn: dict[str, int] = field(default_factory=dict)
+
+
+class ScenarioView:
+    """Scenario ``index`` of a batched twin (or interval record) seen as scenario 0 of a batch
+    of one, which is what :func:`~vdtn_marl.envs.render.render_twin` draws: the attributes
+    named in ``sliced`` (all, for ``sliced=None``) that are tensors or arrays with the batch
+    ``[B, ...]`` first come back as ``[index:index+1]``, and those in ``nested`` as views
+    themselves (the twin's state objects); everything else as it is."""
+
+    def __init__(self, obj, index: int, batch: int, sliced=None, nested=()):
+        self._obj, self._index, self._batch = obj, index, batch
+        self._sliced, self._nested = sliced, nested
+
+    def __getattr__(self, name: str):
+        value = getattr(self._obj, name)
+        if name in self._nested:
+            return ScenarioView(value, self._index, self._batch)
+        if self._sliced is not None and name not in self._sliced:
+            return value
+        shape = getattr(value, "shape", ())
+        if hasattr(value, "__getitem__") and len(shape) > 0 and shape[0] == self._batch:
+            return value[self._index : self._index + 1]
+        return value
+
+
+#: The twin's attributes with a batch dimension that the renderer reads, and its state objects.
+_TWIN_SLICED = ("interval", "last_subchannel", "last_rra_actions")
+_TWIN_NESTED = ("platoon", "link_state")
+
+
+def _render(twin, record, index: int, batch: int):
+    from vdtn_marl.envs.render import render_twin  # matplotlib, only for a video
+
+    if index == 0:
+        return render_twin(twin, record)
+    view = ScenarioView(twin, index, batch, sliced=_TWIN_SLICED, nested=_TWIN_NESTED)
+    return render_twin(view, None if record is None else ScenarioView(record, index, batch))
 
 
 def evaluate_stage(
@@ -74,34 +116,55 @@ def evaluate_stage(
     trace_source: str | TraceSource,
     device: torch.device,
     jocc_iteration: int,
+    video: str | None = None,
 ) -> Evaluation:
     """Evaluate π* (``optimal_policy``, perfect observations) and the ``acting`` system over
     ``cfg.experiment.eval_episodes`` held-out scenarios of ``eval_intervals`` intervals; with
-    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead."""
+    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead.
+
+    ``video`` (a key of :data:`VIDEO_SCENARIOS`) draws scenarios after every interval
+    (:func:`~vdtn_marl.envs.render.render_twin`): ``first`` the first scenario during the
+    evaluation; ``best_worst`` the scenarios of the highest and the lowest control return,
+    by running the same (seeded, deterministic) evaluation once more. Drawing reads the twin
+    and changes no result, and the second run leaves the global RNG as it found it."""
+    if video is not None and video not in VIDEO_SCENARIOS:
+        raise ValueError(f"video={video!r} is not one of {', '.join(VIDEO_SCENARIOS)}")
+    episodes = cfg.experiment.eval_episodes
+    frames: dict[str, list] = {}
+    drawn: dict[str, int] = {}
+
+    def draw(twin, record) -> None:
+        for stem, index in drawn.items():
+            frames.setdefault(stem, []).append(_render(twin, record, index, episodes))
+
+    if video == "first":
+        drawn["episode"] = 0
     common = dict(
-        episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
+        episodes=episodes, intervals=cfg.experiment.eval_intervals,
         seed=EVAL_SEED_OFFSET + cfg.seed, gamma=cfg.algo.gamma, device=device,
         trace_source=trace_source,
     )  # fmt: skip
     began = time.perf_counter()
-    optimal = evaluate_system(params, optimal_policy, None, perfect=True, **common)
+    optimal = evaluate_system(
+        params, optimal_policy, None, perfect=True,
+        on_interval=draw if drawn and acting is None else None, **common,
+    )  # fmt: skip
     row: dict[str, Any] = {"jocc_iteration": jocc_iteration}
     result = None
+    acting_args: dict[str, Any] = {}
     if acting is None:
         cacc = evaluate_system(params, CACCController(params.platoon), None, perfect=True, **common)
         row.update(optimal.metrics)
         row["cacc_control_cost"] = cacc.metrics["control_cost"]
     else:
-        result = evaluate_system(
-            params,
-            acting.control,
-            acting.rra,
-            perfect=False,
-            ivoi_estimator=acting.ivoi_estimator,
-            record_traces=True,
+        acting_args = dict(
+            perfect=False, ivoi_estimator=acting.ivoi_estimator, record_traces=True,
             completion=acting.completion,
-            **common,
-        )
+        )  # fmt: skip
+        result = evaluate_system(
+            params, acting.control, acting.rra, on_interval=draw if drawn else None,
+            **acting_args, **common,
+        )  # fmt: skip
         evoi, low, high = expected_voi(result.returns, optimal.returns)
         ivoi, ivoi_low, ivoi_high = mean_ci(result.ivoi_sums)
         row.update(result.metrics)
@@ -111,7 +174,17 @@ def evaluate_stage(
             ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
         )  # fmt: skip
     row["eval_seconds"] = time.perf_counter() - began
-    return Evaluation(row, optimal, result)
+    if video == "best_worst":
+        returns = (optimal if result is None else result).returns
+        drawn.update(episode_best=int(returns.argmax()), episode_worst=int(returns.argmin()))
+        with torch.random.fork_rng(devices=[]):
+            if result is None:
+                evaluate_system(params, optimal_policy, None, perfect=True, on_interval=draw,
+                                **common)  # fmt: skip
+            else:
+                evaluate_system(params, acting.control, acting.rra, on_interval=draw,
+                                **acting_args, **common)  # fmt: skip
+    return Evaluation(row, optimal, result, frames, drawn)
 
 
 def run_summary(
@@ -126,6 +199,7 @@ def run_summary(
     eval_rows: Sequence[Mapping[str, Any]],
     seconds: float,
     resumed: bool,
+    videos: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The summary of a run of ``task`` (its ``stages``) at ``position``: ``evaluation`` is the
     last evaluation's row, ``eval_rows`` every evaluation's (``evaluation.csv``)."""
@@ -156,6 +230,8 @@ def run_summary(
         "per_iteration": [
             {k: row.get(k) for k in PER_ITERATION_METRICS if k in row} for row in eval_rows
         ],
+        # video=true: the last evaluation's videos by stem (episode, episode_best, ...)
+        **({"videos": {k: str(v) for k, v in videos.items()}} if videos else {}),
         "config": summary_config(cfg, task),
     }
 

@@ -10,10 +10,11 @@ One JOCC iteration runs four stages:
    learned RRA policy afterwards (or the configured RRA baseline);
 3. ``rra``: hand the VoI estimator (``td`` with π*'s critic as v*, or ``rollout``) to the RRA
    environment, whose control module is π̃, and train the RRA agents (MAPPO, group ``rra``)
-   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``throughput``);
+   with the configured reward (``jocc``: κ1·g + κ2·ξ; ``drra``; ``aoi``; ``throughput``);
 4. ``evaluate``: π̃ with the RRA policy on impaired observations and π* on perfect ones, over
-   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, V2I
-   throughput per link, EVoI with its 95% CI (and the IVoI sum for comparison).
+   the same held-out scenarios: control cost, gap/speed errors, CAM delivery and latency, Age
+   of Information, V2I throughput per link, EVoI with its 95% CI (and the IVoI sum for
+   comparison).
 
 ``vdtn-marl train`` runs a subset of the stages (see :data:`TASK_STAGES`). Baselines slot in
 by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
@@ -65,9 +66,12 @@ from vdtn_marl.io.files import (
 )
 from vdtn_marl.io.interrupts import check_interrupt, interrupt_requested
 from vdtn_marl.io.log import logged_stage, progress
+from vdtn_marl.io.loggers import RunLoggers
 from vdtn_marl.io.metrics import MetricsLog
+from vdtn_marl.io.video import write_video
 from vdtn_marl.policies import make_control_baseline, make_rra_baseline
 from vdtn_marl.policies.cacc import CACCController
+from vdtn_marl.reporting.tables import flatten
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.voi import IVOI_ESTIMATORS, VoIReference, make_ivoi_estimator
 
@@ -191,6 +195,7 @@ class JointOptimisation:
                 throughput_scale=rra.throughput_scale,
                 ivoi_scale=rra.ivoi_scale,
                 miss_penalty=rra.miss_penalty,
+                aoi_scale=rra.aoi_scale,
                 burn_in_intervals=algo.rra_burn_in_intervals,
                 **completion_kw,
             )
@@ -211,9 +216,19 @@ class JointOptimisation:
                 active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
             )
         self.position = {"iteration": 0, "stage": 0, "stage_start": None}
-        self.train_log = MetricsLog(self.run_dir, tensorboard=True)
-        self.eval_log = MetricsLog(self.run_dir, tensorboard=False, filename=EVALUATION_FILE)
+        # TensorBoard, W&B, MLflow beside the CSV tables (experiment.loggers), opened on the
+        # first row; the two logs share them
+        self.loggers = RunLoggers(
+            cfg.experiment.loggers,
+            self.run_dir,
+            run_name=f"{task} {self.run_dir.resolve().parent.name}/{self.run_dir.name}",
+            hparams=flatten(to_dict(cfg)),
+        )
+        self.train_log = MetricsLog(self.run_dir, loggers=self.loggers)
+        self.eval_log = MetricsLog(self.run_dir, filename=EVALUATION_FILE, loggers=self.loggers)
         self.last_evaluation: dict[str, Any] | None = None
+        self.videos: dict[str, Path] = {}  # the last evaluation's, by stem (video=true)
+        self.video_indices: dict[str, int] = {}  # and the held-out scenario each shows
 
     # ------------------------------------------------------------------ policies
     def control_policy(self):
@@ -339,7 +354,7 @@ class JointOptimisation:
                 stats = trainer.train_iteration()
                 row = {"jocc_iteration": self.position["iteration"], "stage": stage}
                 row.update(stats.__dict__)
-                self.train_log.log(row, step=None)
+                self.train_log.log(row, step=stats.iteration, prefix=stage, step_key="iteration")
                 bar.update(1)
                 bar.set_postfix(stage=stage, reward=f"{stats.reward_mean:.4f}")
                 if interrupt_requested() and trainer.iteration < end:
@@ -442,9 +457,17 @@ class JointOptimisation:
             trace_source=self.eval_traces,
             device=self.device,
             jocc_iteration=self.position["iteration"],
+            video=self.cfg.video_scenarios if self.cfg.video else None,
         )
         self._last_results = (result.optimal, result.acting)
-        self.eval_log.log(result.row)
+        fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
+        for stem, frames in result.frames.items():
+            path = write_video(self.run_dir, frames, fps, self.cfg.video_format, stem=stem)
+            self.videos[stem], self.video_indices[stem] = path, result.drawn[stem]
+            _log.info("video of evaluation scenario %d: %s", result.drawn[stem], path)
+        self.eval_log.log(
+            result.row, step=self.position["iteration"], prefix="eval", step_key="jocc_iteration"
+        )
         self.last_evaluation = result.row
         return result.row
 
@@ -480,7 +503,7 @@ class JointOptimisation:
         self.write_raw_evaluation()
         summary["plots"] = self.write_plots()
         atomic_write_json(self.run_dir / SUMMARY_FILE, summary)
-        self.train_log.close()
+        self.loggers.close()
         return summary
 
     def write_raw_evaluation(self) -> None:
@@ -529,6 +552,7 @@ class JointOptimisation:
             eval_rows=self.eval_log.rows,
             seconds=seconds,
             resumed=resumed,
+            videos=self.videos,
         )
 
 

@@ -1,5 +1,6 @@
 """The metrics log of a run: rows of metrics rewritten atomically as a CSV table
-(``metrics.csv``, ``evaluation.csv``), and TensorBoard scalars when it is installed."""
+(``metrics.csv``, ``evaluation.csv``), the source of the run's plots, and the same rows as
+scalars to the run's other loggers (:mod:`.loggers`: TensorBoard, W&B, MLflow)."""
 
 from __future__ import annotations
 
@@ -11,47 +12,35 @@ from typing import Any
 
 from vdtn_marl.errors import RunFileError
 from vdtn_marl.io.files import METRICS_FILE, atomic_write_text, read_csv_rows
+from vdtn_marl.io.loggers import RunLoggers
 
 
 class MetricsLog:
     """Rows of metrics kept in memory and rewritten atomically as ``metrics.csv``.
 
-    Rows may have different keys; the header is the union in first-seen order. TensorBoard
-    scalars are written too when ``tensorboard`` is installed (``tensorboard=True``).
+    Rows may have different keys; the header is the union in first-seen order. With
+    ``loggers`` (shared by the logs of a run), a row logged with a ``step`` goes to them too,
+    its numbers as the scalars ``<prefix>/<key>``.
     """
 
     def __init__(
         self,
         run_dir: str | Path,
-        tensorboard: bool = True,
         rows: Iterable = (),
         filename: str = METRICS_FILE,
+        loggers: RunLoggers | None = None,
     ):
         self.path = Path(run_dir) / filename
         self.rows: list[dict[str, Any]] = [dict(r) for r in rows]
-        self._run_dir = Path(run_dir)
-        self._tensorboard = tensorboard
-        self._writer = None  # opened on the first scalar: a run that logs none has no folder
-
-    def _scalar_writer(self):
-        """The TensorBoard writer, opened on first use; None when tensorboard is off or not
-        installed."""
-        if self._writer is None and self._tensorboard:
-            try:
-                from torch.utils.tensorboard import SummaryWriter
-            except ImportError:  # tensorboard is optional
-                self._tensorboard = False
-                return None
-            self._writer = SummaryWriter(log_dir=str(self._run_dir / "tensorboard"))
-        return self._writer
+        self.loggers = loggers
 
     @classmethod
     def resume(
         cls,
         run_dir: str | Path,
-        tensorboard: bool = True,
         filename: str = METRICS_FILE,
         expected_rows: int | None = None,
+        loggers: RunLoggers | None = None,
     ) -> MetricsLog:
         """Re-open a run's log, keeping the rows already written. A file that is not a whole
         CSV table, or that holds fewer than ``expected_rows`` rows (those a checkpoint
@@ -64,20 +53,21 @@ class MetricsLog:
                 f"{path} {state}, but the checkpoint counts {expected_rows}: the file was cut "
                 "or edited; restore it, or start the run again in another directory"
             )
-        return cls(run_dir, tensorboard=tensorboard, rows=rows, filename=filename)
+        return cls(run_dir, rows=rows, filename=filename, loggers=loggers)
 
-    def log(self, row: Mapping[str, Any], step: int | None = None) -> None:
+    def log(
+        self,
+        row: Mapping[str, Any],
+        step: int | None = None,
+        prefix: str = "",
+        step_key: str | None = None,
+    ) -> None:
+        """Append ``row`` and rewrite the table; with a ``step``, send its numbers (but
+        ``step_key``, the one that holds the step) to the loggers as ``<prefix>/<key>``."""
         self.rows.append(dict(row))
-        scalars = {
-            key: value
-            for key, value in row.items()
-            if isinstance(value, int | float) and not isinstance(value, bool)
-        }
-        writer = self._scalar_writer() if step is not None and scalars else None
-        if writer is not None:
-            for key, value in scalars.items():
-                writer.add_scalar(key, value, step)
         self.flush()
+        if self.loggers is not None and step is not None:
+            self.loggers.log(row, step, prefix, skip=step_key)
 
     def truncate(self, keep: int) -> None:
         """Drop rows after the first ``keep`` (a resumed run rewrites what it repeats)."""
@@ -93,9 +83,3 @@ class MetricsLog:
         writer.writeheader()
         writer.writerows(self.rows)
         atomic_write_text(self.path, buffer.getvalue())
-        if self._writer is not None:
-            self._writer.flush()
-
-    def close(self) -> None:
-        if self._writer is not None:
-            self._writer.close()

@@ -40,7 +40,14 @@ directory's state), :mod:`~vdtn_marl.leaderboard.runner` (running the grid),
 from __future__ import annotations
 
 from vdtn_marl.errors import LeaderboardError
-from vdtn_marl.experiment.metrics import CAM_LATENCY_KEYS, METRIC_KEYS, METRICS, Metric
+from vdtn_marl.experiment.metrics import (
+    AOI_KEYS,
+    CAM_LATENCY_KEYS,
+    METRIC_KEYS,
+    METRICS,
+    NO_DELIVERY_KEYS,
+    Metric,
+)
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
     Cell,
@@ -80,6 +87,7 @@ from vdtn_marl.leaderboard.stats import (
 from vdtn_marl.leaderboard.target import check_target, fieller_ratio_ci
 
 __all__ = [
+    "AOI_KEYS",
     "CAM_LATENCY_KEYS",
     "INTERVALS",
     "MANIFEST_FILE",
@@ -87,6 +95,7 @@ __all__ = [
     "METRICS",
     "METRIC_KEYS",
     "MIN_RUNS_FOR_IQM",
+    "NO_DELIVERY_KEYS",
     "REPORT_FILE",
     "RUNS_CSV",
     "STATS_CSV",

@@ -24,8 +24,9 @@ from vdtn_marl.experiment.compose import (
 from vdtn_marl.experiment.config import BenchConfig, BenchmarkConfig
 from vdtn_marl.experiment.metrics import (
     CAM_LATENCY_KEYS,  # noqa: F401
-    METRIC_KEYS,
+    METRIC_KEYS,  # noqa: F401
     METRICS,  # noqa: F401
+    REQUIRED_METRIC_KEYS,
     Metric,  # noqa: F401
 )
 from vdtn_marl.io.files import SUMMARY_FILE, read_json
@@ -199,7 +200,7 @@ def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
         summary = read_json(path)
     except (OSError, ValueError):
         return None
-    if not isinstance(summary, dict) or not all(k in summary for k in METRIC_KEYS):
+    if not isinstance(summary, dict) or not all(k in summary for k in REQUIRED_METRIC_KEYS):
         return None
     iterations = data.get("experiment", {}).get("jocc_iterations")
     if summary.get("iterations") != iterations:

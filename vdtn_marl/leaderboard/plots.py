@@ -1,5 +1,5 @@
 """The leaderboard's PNG plots per scenario (error traces, bars with CIs, CAM latency CDF, κ1
-Pareto front, training curves).
+Pareto front, training curves, Age of Information).
 """
 
 from __future__ import annotations
@@ -82,7 +82,10 @@ def write_plots(
             (reporting.V2I_THROUGHPUT, "v2i_throughput", "V2I throughput per link (Mbps)"),
             ("cam_delivery_rate", "cam_delivery", "CAM delivery rate (fraction within interval)"),
             ("control_cost", "control_cost", "control cost (dimensionless; lower is better)"),
+            ("aoi_ms_mean", "aoi", "Age of Information of CAM content, mean (ms)"),
         ):
+            if not any(by_method[method][key]["n"] for method in by_method):
+                continue  # runs written before the metric was reported (AoI)
             bars = [
                 {
                     "label": method,

@@ -19,7 +19,7 @@ from vdtn_marl.data.traces import trace_set_provenance
 from vdtn_marl.errors import LeaderboardError
 from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.experiment.config import BenchConfig
-from vdtn_marl.experiment.metrics import METRICS
+from vdtn_marl.experiment.metrics import AOI_KEYS, METRICS
 from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
 from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan
 from vdtn_marl.leaderboard.plots import write_plots
@@ -36,6 +36,7 @@ from vdtn_marl.leaderboard.stats import (
     statistics,
 )
 from vdtn_marl.leaderboard.target import check_target, target_markdown
+from vdtn_marl.leaderboard.videos import LeaderboardVideo, write_videos
 from vdtn_marl.reporting.tables import is_finite
 
 REPORT_FILE = "LEADERBOARD.md"
@@ -200,6 +201,7 @@ def _markdown(
     dropped: Sequence[str],
     target: Mapping[str, Any] | None = None,
     marl_eval_left_out: int = 0,
+    videos: Sequence[LeaderboardVideo] = (),
 ) -> str:
     b = cfg.benchmark
     table_metrics = [m for m in METRICS if m.table]
@@ -312,11 +314,31 @@ def _markdown(
                 )
                 + ".",
             ]
+        missing_aoi = [
+            method
+            for method, metrics in by_method.items()
+            if min(metrics[k]["n"] for k in AOI_KEYS) < metrics["control_cost"]["n"]
+        ]
+        if missing_aoi:
+            lines += [
+                "",
+                "Age of Information is missing from runs written before vdtn-marl reported it, "
+                "and peak AoI is undefined for a run that delivered no CAM; those runs are left "
+                "out of the AoI columns: "
+                + ", ".join(
+                    f"{m} (AoI {by_method[m]['aoi_ms_mean']['n']}, peak AoI "
+                    f"{by_method[m]['peak_aoi_ms_mean']['n']} of "
+                    f"{by_method[m]['control_cost']['n']})"
+                    for m in missing_aoi
+                )
+                + ".",
+            ]
         scenario_plots = plots.get(scenario, {})
         captions = {
             "error_traces": "Gap and speed errors over time",
             "v2i_throughput": "V2I throughput per link",
             "cam_delivery": "CAM delivery rate",
+            "aoi": "Age of Information",
             "cam_latency_cdf": "CAM latency CDF",
             "pareto_kappa1": "κ1 Pareto front",
             "control_cost": "Control cost",
@@ -327,6 +349,19 @@ def _markdown(
             for kind, caption in captions.items():
                 if kind in scenario_plots:
                     lines.append(f"![{scenario}: {caption}]({_png(scenario_plots[kind])})")
+        mine = [v for v in videos if v.cell.scenario == scenario]
+        if mine:
+            lines += [
+                "",
+                "Videos (one frame per control interval) of the held-out evaluation scenario with "
+                "the highest (best) and the lowest (worst) control return: "
+                + ", ".join(
+                    f"[{v.cell.method} seed {v.cell.seed} {v.label} (scenario "
+                    f"{v.scenario_index})]({_png(v.path)})"
+                    for v in mine
+                )
+                + ".",
+            ]
     lines += [
         "",
         "## Files",
@@ -369,6 +404,7 @@ def write_report(
     stats = statistics(rows, b)
     paired = paired_differences(rows, b)
     plots = write_plots(cfg, rows, stats, report_dir)
+    videos = write_videos(cfg, cells, composed, report_dir) if cfg.video else []
     marl_eval, dropped = marl_eval_data(rows, b)
     marl_eval_left_out = sum(is_extra_run(r, b) for r in rows)
     target = check_target(rows, b)
@@ -446,11 +482,14 @@ def write_report(
             dropped,
             target,
             marl_eval_left_out,
+            videos,
         ),
     )
     for scenario, kinds in plots.items():
         for kind, path in kinds.items():
             written[f"{scenario}/{kind}"] = path
+    for video in videos:
+        written[f"{video.cell.scenario}/video_{video.cell.method}_{video.label}"] = video.path
     return written
 
 

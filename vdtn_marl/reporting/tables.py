@@ -40,6 +40,7 @@ TABLE_METRICS = (
     V2I_THROUGHPUT,
     "cam_delivery_rate",
     "cam_latency_ms_mean",
+    "aoi_ms_mean",
     "gap_error_abs_m",
     "evoi",
 )
@@ -57,6 +58,7 @@ SHORT_NAMES = {
     V2I_THROUGHPUT: "V2I Mbps/link",
     "cam_delivery_rate": "CAM delivered",
     "cam_latency_ms_mean": "CAM ms",
+    "aoi_ms_mean": "AoI ms",
     "gap_error_abs_m": "|gap err| m",
     "speed_error_abs_mps": "|speed err| m/s",
     "collision_rate": "collisions",

@@ -46,7 +46,7 @@ import torch
 
 from vdtn_marl.data.traces import TraceSource, get_trace_source
 from vdtn_marl.errors import ConfigError
-from vdtn_marl.sim import channel, link
+from vdtn_marl.sim import aoi, channel, link
 from vdtn_marl.sim.backend import ArrayNamespace, as_float, cat, clamp, like, mean_axis, stack
 from vdtn_marl.sim.layout import (
     RRA_CAM_AGE_CLIP_INTERVALS,
@@ -540,6 +540,15 @@ class DigitalTwin:
         remaining = self.link_state.remaining_bits / self.params.radio.cam_size_bits
         obs[..., lay.bits_left] = clamp(remaining, 0.0, 1.0)
         return obs
+
+    def cam_age_ms(self):
+        """Age of Information (ms) of the CAM content each recipient holds after the subframes
+        run so far in this interval, [B, L] float32 in the backend's arrays (recipient i is at
+        the end of link i; :mod:`vdtn_marl.sim.aoi`, docs/model.md §4.8). Read it between
+        :meth:`begin_interval` and :meth:`finish_interval`."""
+        held_age = self._interval[:, None] - self._cam_held_interval
+        delay = self.link_state.delay_subframes
+        return aoi.age_ms(held_age, delay, self.subframe, self.interval_ms, self.subframe_ms)
 
     # ------------------------------------------------------------------ interval end
     def drop_cams(self, mask: torch.Tensor) -> None:
