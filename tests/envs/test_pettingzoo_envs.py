@@ -13,8 +13,8 @@ from vdtn_marl.envs import PlatoonControlEnv, TwoTimescaleEnv
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator
 
-ENV_IDS = [env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/")]
-"""Every built-in id, from the registry (tests/test_registry.py pins the list itself)."""
+ENV_IDS = [env_id for env_id in vdtn_marl.list_envs(api="pettingzoo") if env_id.startswith("vdtn/")]
+"""Every built-in PettingZoo id, from the registry (tests/test_registry.py pins the list)."""
 T = 50
 
 

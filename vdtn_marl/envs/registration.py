@@ -435,6 +435,8 @@ VERSION_CHANGES: dict[str, tuple[str, ...]] = {
     "vdtn/platoon-control-impaired-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
     "vdtn/v2x-rra-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
     "vdtn/vdtn-joint-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
+    # a face of the impaired dynamics, versioned with them
+    "vdtn/platoon-control-impaired-central-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
 }
 """Changes of each built-in id against its previous version (what DeprecatedEnvError says)."""
 for _new_id, _changes in VERSION_CHANGES.items():

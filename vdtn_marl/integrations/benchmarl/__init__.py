@@ -310,6 +310,15 @@ def _register() -> None:
 
 _register()
 
+
+def run() -> None:
+    """BenchMARL's ``benchmarl/run.py`` (its Hydra app: configs from BenchMARL's ``conf/`` and
+    the ``vdtn`` tasks of this package), with the command line of this process."""
+    from benchmarl.run import hydra_experiment
+
+    hydra_experiment()
+
+
 __all__ = [
     "CONF_DIR",
     "ENV_NAME",
@@ -319,5 +328,6 @@ __all__ = [
     "VDTNTask",
     "default_config",
     "refusal",
+    "run",
     "task_yaml",
 ]

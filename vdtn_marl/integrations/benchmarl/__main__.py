@@ -8,8 +8,7 @@ Every override of BenchMARL's own command line works (``experiment.max_n_iters=.
 ``vdtn`` tasks, from this package (docs/integrations.md).
 """
 
-import vdtn_marl.integrations.benchmarl  # noqa: F401  (registers the tasks)
-from benchmarl.run import hydra_experiment
+from vdtn_marl.integrations.benchmarl import run
 
 if __name__ == "__main__":
-    hydra_experiment()
+    run()
