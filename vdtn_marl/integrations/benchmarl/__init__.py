@@ -1,7 +1,7 @@
 """BenchMARL tasks of vdtn-marl: one import registers them (docs/integrations.md).
 
     import vdtn_marl.integrations.benchmarl            # registers the tasks
-    python -m vdtn_marl.integrations.benchmarl algorithm=mappo task=vdtn/control
+    python -m vdtn_marl.integrations benchmarl algorithm=mappo task=vdtn/control
 
 Every single-clock face is a task of the environment ``vdtn``, built on its batched TorchRL
 face (``vdtn_marl.make(id, batch_size=B)``: BenchMARL's ``n_envs_per_worker`` scenarios in one
@@ -50,7 +50,7 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.envs.registration import make, spec
-from vdtn_marl.errors import ConfigError
+from vdtn_marl.errors import ConfigError, MissingExtraError
 
 EXTRA_HINT = (
     "pip install 'vdtn-marl[benchmarl]' -c constraints-benchmarl.txt (BenchMARL 1.5.x requires "
@@ -60,15 +60,16 @@ EXTRA_HINT = (
 
 def _import_benchmarl():
     if importlib.util.find_spec("benchmarl") is None:
-        raise ImportError(f"BenchMARL is not installed: {EXTRA_HINT}")
+        raise MissingExtraError(f"BenchMARL is not installed: {EXTRA_HINT}", "benchmarl")
     try:
         import benchmarl
         from benchmarl import environments
         from benchmarl.environments.common import Task, TaskClass
     except ImportError as exc:  # e.g. BenchMARL 1.5.1 on torchrl 0.14
-        raise ImportError(
+        raise MissingExtraError(
             f"BenchMARL is installed but does not import ({type(exc).__name__}: {exc}); "
-            f"install the tested versions: {EXTRA_HINT}"
+            f"install the tested versions: {EXTRA_HINT}",
+            "benchmarl",
         ) from exc
     return benchmarl, environments, Task, TaskClass
 
@@ -266,6 +267,11 @@ class VDTNTask(Task):
         raise ConfigError(f"no BenchMARL task runs {env_id!r}; tasks: {_single_clock_tasks()}")
 
 
+@dataclass
+class _RefusedConfig:
+    """The (empty) schema of a refused name, so that BenchMARL reaches the refusal silently."""
+
+
 class _RefusedTask:
     """What ``task_config_registry["vdtn/joint"]`` holds: asking for it raises."""
 
@@ -305,6 +311,9 @@ def _register() -> None:
         store.store(name=name, group=f"task/{ENV_NAME}", node=OmegaConf.load(task_yaml(name)))
         _environments._task_class_registry[f"{ENV_NAME}_{name}"] = schema
     for name in REFUSED:
+        module = types.ModuleType(f"{package.__name__}.{name}")
+        module.TaskConfig = _RefusedConfig
+        sys.modules.setdefault(module.__name__, module)
         store.store(name=name, group=f"task/{ENV_NAME}", node={})
 
 
