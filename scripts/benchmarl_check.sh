@@ -22,9 +22,7 @@ cd "$ROOT"
 
 VENV="${BENCHMARL_VENV:-$ROOT/.venv-benchmarl}"
 PY="$VENV/bin/python"
-STAMP="$VENV/.vdtn-marl-benchmarl.sha256"
 CONSTRAINTS=constraints-benchmarl.txt
-export PIP_DISABLE_PIP_VERSION_CHECK=1
 
 say() { printf '[benchmarl_check] %s\n' "$*" >&2; }
 die() { printf '[benchmarl_check] error: %s\n' "$*" >&2; exit 1; }
@@ -34,36 +32,11 @@ case "${1:-}" in
   *) die "unknown argument '$1' (usage: bash scripts/benchmarl_check.sh [full])" ;;
 esac
 
-setup() {
-  if [[ ! -x "$PY" ]]; then
-    local py="${PYTHON:-python3}"
-    command -v "$py" >/dev/null 2>&1 || die "$py not found; set PYTHON"
-    say "creating $VENV with $("$py" -V 2>&1)"
-    "$py" -m venv "$VENV"
-  fi
-  local want
-  want="$(cat pyproject.toml "$CONSTRAINTS" | "$PY" -c \
-    'import hashlib, sys; print(hashlib.sha256(sys.version.encode() + sys.stdin.buffer.read()).hexdigest())')"
-  if [[ -f "$STAMP" && "$(cat "$STAMP")" == "$want" ]]; then
-    return 0
-  fi
-  rm -f "$STAMP"
-  local torch_pin
-  torch_pin="$(grep -E '^torch==' "$CONSTRAINTS" | head -n 1)"
-  [[ -n "$torch_pin" ]] || die "$CONSTRAINTS has no torch==VERSION line"
-  local torch_args=()
-  [[ -n "${TORCH_INDEX_URL:-}" ]] && torch_args=(--index-url "$TORCH_INDEX_URL")
-  "$PY" -m pip install --quiet --upgrade pip
-  # torch first, alone, so that nothing later can pull a CUDA build (see README, Installation)
-  say "installing $torch_pin"
-  "$PY" -m pip install --quiet ${torch_args[@]+"${torch_args[@]}"} "$torch_pin"
-  say "installing vdtn-marl with the test and benchmarl extras, pinned by $CONSTRAINTS"
-  "$PY" -m pip install --quiet -c "$CONSTRAINTS" -e ".[test,benchmarl]"
-  printf '%s\n' "$want" >"$STAMP"
-}
+# shellcheck source=scripts/extra_venv.sh
+source scripts/extra_venv.sh
 
 SECONDS=0
-setup
+extra_venv_setup "$VENV" "$CONSTRAINTS" test,benchmarl
 say "setup: ${SECONDS}s ($("$PY" -c 'import benchmarl, torchrl, tensordict, torch
 print("benchmarl", benchmarl.__version__, "torchrl", torchrl.__version__,
       "tensordict", tensordict.__version__, "torch", torch.__version__)'))"
