@@ -7,9 +7,8 @@
 #   bash scripts/benchmarl_check.sh          the check (a few minutes; setup once more)
 #   bash scripts/benchmarl_check.sh full     the same, then the whole test suite on that stack
 #
-# Not part of .ci/run: the main suite alone takes 15 to 25 minutes on 2 cores, so CI with this
-# check would not stay well under 25 minutes (docs/integrations.md has its timing). Run it when
-# the integration, the environments' TorchRL face or the pins change.
+# .ci/run runs the check (not `full`) after the main suite; docs/integrations.md has its timing.
+# Run `full` when the integration, the environments' TorchRL face or the pins change.
 #
 # Environment variables:
 #   BENCHMARL_VENV   where to build the environment (default: .venv-benchmarl in the repository)
