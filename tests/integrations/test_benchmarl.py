@@ -70,10 +70,20 @@ benchmarl_installed = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def vb():
+    """The integration, imported. Importing BenchMARL (and our tasks) adds the config groups
+    `task`, `algorithm` and `experiment` to Hydra's process-wide ConfigStore; they go when the
+    module's tests end, as they would turn the plain `task=` key of vdtn-marl's own CLI into a
+    group override for the tests that run later in this process."""
+    from hydra.core.config_store import ConfigStore
+
+    store = ConfigStore.instance().repo
+    before = set(store)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
         import vdtn_marl.integrations.benchmarl as module
-    return module
+    yield module
+    for group in set(store) - before:
+        del store[group]
 
 
 @benchmarl_installed
