@@ -128,7 +128,6 @@ frames_per_batch = args.num_envs * args.steps
 collector = Collector(
     env, actor, frames_per_batch=frames_per_batch,
     total_frames=frames_per_batch * args.iterations, device=args.device,
-    auto_register_policy_transforms=False,  # the policy keeps no recurrent state
 )  # fmt: skip
 buffer = ReplayBuffer(
     storage=LazyTensorStorage(frames_per_batch, device=args.device),

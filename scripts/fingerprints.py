@@ -77,7 +77,7 @@ def pettingzoo_faces() -> dict[str, str]:
     import vdtn_marl
 
     out = {}
-    for env_id in vdtn_marl.list_envs():
+    for env_id in vdtn_marl.list_envs(api="pettingzoo"):
         env = vdtn_marl.make(env_id, seed=SEED)
         clocks = vdtn_marl.spec(env_id).clocks or {}
         subframe_env = any(period == 1 for period in clocks.values())

@@ -5,8 +5,9 @@ torch's import time once per case) and, for a few cases, in a subprocess for the
 code and stderr.
 
 The tests named ``*_real`` run the real entry points of ``vdtn_marl.experiment.api`` (a smoke
-`train` then `eval`, a two-job joblib sweep). The tests named ``*_fake_entry_points`` check CLI
-plumbing that does not depend on training (the submitit and Ray launchers) with a fake ``api``
+`train` then `eval`, a two-job joblib sweep, and a two-job Ray sweep where the Ray plugin is
+installed: scripts/ray_check.sh). The tests named ``*_fake_entry_points`` check CLI
+plumbing that does not depend on training (the submitit launcher) with a fake ``api``
 installed by a ``sitecustomize`` module on PYTHONPATH, so that launcher worker processes see it
 too; that keeps them fast. The resume test patches ``api.jocc`` in-process.
 """
@@ -456,22 +457,27 @@ def test_submitit_local_sweep_fake_entry_points(tmp_path, fake_env):
     _check_sweep(tmp_path, result, [0, 1])
 
 
+# --- runs and sweeps with the real entry points --------------------------------------------
+
+
 @pytest.mark.skipif(
     importlib.util.find_spec("hydra_plugins.hydra_ray_launcher") is None,
-    reason="hydra-ray-launcher is not installed (see docs/cli.md, Ray)",
+    reason="hydra-ray-launcher is not installed (scripts/ray_check.sh; docs/cli.md, Ray)",
 )
-def test_ray_sweep_on_local_instance_fake_entry_points(tmp_path, fake_env):
-    """The Ray launcher starts a local Ray instance on loopback and runs the jobs there."""
+def test_ray_sweep_two_jobs_real(tmp_path):
+    """Two smoke JOCC jobs, each a Ray task of a local instance (scripts/ray_check.sh)."""
     result = run_cli(
         "-m", "jocc", "rra.kappa1=0,1", "experiment=smoke", "hydra/launcher=ray",
         "+hydra.launcher.ray.init.num_cpus=2", "+hydra.launcher.ray.init.include_dashboard=false",
         "+hydra.launcher.ray.init._node_ip_address=127.0.0.1",
-        cwd=tmp_path, env={**fake_env, "RAY_ADDRESS": ""}, timeout=300,
+        cwd=tmp_path, env={"RAY_ADDRESS": "", "OMP_NUM_THREADS": "1"}, timeout=600,
     )  # fmt: skip
-    _check_sweep(tmp_path, result, [0, 1])
-
-
-# --- runs and sweeps with the real entry points --------------------------------------------
+    sweep_dir = _check_sweep(tmp_path, result, [0, 1])
+    assert "Ray Launcher is launching 2 jobs" in result.stdout + result.stderr
+    for job in ("0", "1"):
+        summary = json.loads((sweep_dir / job / "summary.json").read_text())
+        assert summary["control_cost"] > 0 and summary["v2i_throughput_mbps_per_link"] > 0
+        assert 0.0 <= summary["cam_delivery_rate"] <= 1.0
 
 
 def test_train_smoke_then_eval_real(tmp_path):

@@ -305,7 +305,9 @@ def _finite(value) -> bool:
     return bool(np.all(np.isfinite(np.asarray(value, dtype=np.float64))))
 
 
-@pytest.mark.parametrize("env_id", [i for i in vdtn_marl.list_envs() if i.startswith("vdtn/")])
+@pytest.mark.parametrize(
+    "env_id", [i for i in vdtn_marl.list_envs(api="pettingzoo") if i.startswith("vdtn/")]
+)
 @pytest.mark.parametrize(
     "kind, vehicles, shadow_db",
     [("steps", 4, 30.0), ("stopped", 4, 30.0), ("steps", 64, 3.0), ("stopped", 64, 0.0)],

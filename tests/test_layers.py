@@ -1,8 +1,8 @@
 """The package's imports form a DAG of rooms, bottom to top (docs/layout.md):
 
 errors → data, io → sim → core → policies → voi → scenarios → envs (with their registration) →
-algos → reporting → experiment (config schema, compose, JOCC stages, evaluation, checkpoints,
-outputs) → leaderboard → cli.
+algos, integrations → reporting → experiment (config schema, compose, JOCC stages, evaluation,
+checkpoints, outputs) → leaderboard → cli.
 
 Every ``import`` counts, deferred ones inside functions included. ``__main__`` modules are entry
 scripts that no module imports, so they may reach the command line."""
@@ -30,6 +30,7 @@ LAYERS = {
     "envs": 7,
     "": 7,
     "algos": 8,
+    "integrations": 8,
     "reporting": 9,
     "experiment": 10,
     "leaderboard": 11,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 import subprocess
 import sys
 import textwrap
@@ -11,6 +12,7 @@ import warnings
 import pytest
 
 import vdtn_marl
+import vdtn_marl.errors
 from vdtn_marl.envs import registration as registry
 
 NS = "vdtntest"
@@ -163,11 +165,60 @@ def test_builtin_specs_registered_with_metadata():
         "vdtn/platoon-control-impaired-v1",
         "vdtn/v2x-rra-v1",
         "vdtn/vdtn-joint-v1",
+        "vdtn/platoon-control-central-v0",  # the Gymnasium single-agent faces
+        "vdtn/platoon-control-impaired-central-v1",
     }
+    assert set(vdtn_marl.list_envs(api="gymnasium")) == {
+        "vdtn/platoon-control-central-v0",
+        "vdtn/platoon-control-impaired-central-v1",
+    }
+    assert set(vdtn_marl.list_envs(api="pettingzoo")) == builtin - set(
+        vdtn_marl.list_envs(api="gymnasium")
+    )
     assert vdtn_marl.spec("vdtn/platoon-control-v0").kwargs == {"impaired": False}
     assert vdtn_marl.spec("vdtn/platoon-control-impaired-v1").kwargs == {"impaired": True}
     assert vdtn_marl.spec("vdtn/v2x-rra-v1").clocks == {"rra": 1}
     assert vdtn_marl.spec("vdtn/vdtn-joint-v1").clocks == {"vehicle": 50, "rra": 1}
+
+
+def test_register_api_and_vector_entry_point():
+    vdtn_marl.register(
+        f"{NS}/dummy-v0",
+        DummyEnv,
+        api="gymnasium",
+        vector_entry_point=lambda batch_size, **kw: ("batched", batch_size, kw),
+        vector_kwargs={"impaired": True},
+    )
+    assert f"{NS}/dummy-v0" in vdtn_marl.list_envs(api="gymnasium")
+    assert f"{NS}/dummy-v0" not in vdtn_marl.list_envs(api="pettingzoo")
+    made = vdtn_marl.make(f"{NS}/dummy-v0", batch_size=5, seed=2)
+    assert made == ("batched", 5, {"impaired": True, "seed": 2})
+    assert isinstance(vdtn_marl.make(f"{NS}/dummy-v0"), DummyEnv)
+
+
+@pytest.mark.parametrize(
+    "kwargs, fragment",
+    [
+        ({"api": "rllib"}, "api='rllib'"),
+        ({"vector_entry_point": "no_colon"}, "vector entry point 'no_colon'"),
+    ],
+)
+def test_register_refuses_a_bad_api_or_vector_entry_point(kwargs, fragment):
+    with pytest.raises(ValueError, match=re.escape(fragment)):
+        vdtn_marl.register(f"{NS}/dummy-v0", DummyEnv, **kwargs)
+
+
+def test_list_envs_refuses_an_unknown_api():
+    with pytest.raises(ValueError, match="api='rllib'"):
+        vdtn_marl.list_envs(api="rllib")
+
+
+def test_batch_size_for_an_id_without_a_batched_face_names_those_with_one():
+    vdtn_marl.register(f"{NS}/dummy-v0", DummyEnv)
+    with pytest.raises(vdtn_marl.errors.ConfigError, match="batch_size=4") as info:
+        vdtn_marl.make(f"{NS}/dummy-v0", batch_size=4)
+    batched = [i for i in vdtn_marl.list_envs() if vdtn_marl.spec(i).vector_entry_point]
+    assert batched and all(env_id in str(info.value) for env_id in batched)
 
 
 def _superseded_builtins() -> dict[str, str]:

@@ -88,6 +88,11 @@ def test_wheel_ships_every_config(installed):
     assert on_disk, "conf/ holds no yaml"
     assert on_disk <= names, sorted(on_disk - names)
     assert "vdtn_marl/conf/hydra/launcher/joblib.yaml" in names
+    tasks = {
+        p.relative_to(ROOT).as_posix()
+        for p in (ROOT / "vdtn_marl/integrations/benchmarl/conf").rglob("*.yaml")
+    }
+    assert tasks and tasks <= names, sorted(tasks - names)  # the BenchMARL task configs
     assert {"vdtn_marl/reporting/tables.py", "vdtn_marl/io/files.py"} <= names
     cycles = {f"vdtn_marl/data/cycles/{p.name}" for p in (ROOT / "vdtn_marl/data/cycles").glob("*")}
     assert cycles == {"vdtn_marl/data/cycles/udds.csv", "vdtn_marl/data/cycles/hwfet.csv"}

@@ -60,3 +60,12 @@ class DeprecatedEnvError(UnknownEnvError):
 
 class LeaderboardError(Exception):
     """A benchmark that cannot run or resume as asked; the message says why and what to do."""
+
+
+class MissingExtraError(ImportError):
+    """An optional library is missing (or does not import); the message names the extra that
+    installs the tested versions (``pip install 'vdtn-marl[EXTRA]'``)."""
+
+    def __init__(self, message: str, extra: str) -> None:
+        super().__init__(message)
+        self.extra = extra

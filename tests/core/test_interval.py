@@ -26,7 +26,7 @@ PROTOCOL_CALLS = {"finish_interval", "begin_interval", "close_interval"}
 
 
 def _faces():
-    for env_id in vdtn_marl.list_envs():
+    for env_id in vdtn_marl.list_envs(api="pettingzoo"):
         yield env_id, lambda env_id=env_id: vdtn_marl.make(env_id, seed=0, episode_intervals=4)
     for mode in MODES:
         yield (

@@ -31,7 +31,9 @@ from vdtn_marl.sim.completion import (
 )
 from vdtn_marl.sim.params import ConfigError
 
-PZ_ENVS = tuple(env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/"))
+PZ_ENVS = tuple(
+    env_id for env_id in vdtn_marl.list_envs(api="pettingzoo") if env_id.startswith("vdtn/")
+)
 """Every built-in id, from the registry."""
 SHORT = {"episode_intervals": 3, "subframes_per_interval": 5}
 

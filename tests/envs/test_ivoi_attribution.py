@@ -28,7 +28,7 @@ def expected_xi(follower: int, interval: int) -> float:
 
 def _rra_env_ids() -> list[str]:
     ids = []
-    for env_id in vdtn_marl.list_envs():
+    for env_id in vdtn_marl.list_envs(api="pettingzoo"):
         try:
             env = vdtn_marl.make(env_id)
         except Exception:  # a superseded id that refuses to build

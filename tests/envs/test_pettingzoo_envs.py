@@ -13,8 +13,8 @@ from vdtn_marl.envs import PlatoonControlEnv, TwoTimescaleEnv
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.voi import RolloutIVoIEstimator
 
-ENV_IDS = [env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/")]
-"""Every built-in id, from the registry (tests/test_registry.py pins the list itself)."""
+ENV_IDS = [env_id for env_id in vdtn_marl.list_envs(api="pettingzoo") if env_id.startswith("vdtn/")]
+"""Every built-in PettingZoo id, from the registry (tests/test_registry.py pins the list)."""
 T = 50
 
 
@@ -35,12 +35,18 @@ def test_parallel_seed(env_id):
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)
-def test_pettingzoo_wrapper_check_env_specs(env_id):
+@pytest.mark.parametrize("return_state", [False, True])
+def test_pettingzoo_wrapper_check_env_specs(env_id, return_state):
     from torchrl.envs.libs.pettingzoo import PettingZooWrapper
     from torchrl.envs.utils import check_env_specs
 
-    env = PettingZooWrapper(vdtn_marl.make(env_id, seed=0, episode_intervals=3), use_mask=True)
+    face = vdtn_marl.make(env_id, seed=0, episode_intervals=3)
+    env = PettingZooWrapper(face, use_mask=True, return_state=return_state)
     check_env_specs(env, seed=0)
+    if return_state:  # read from the face's state_space; the state of all N vehicles
+        n = face.twin.params.platoon.num_vehicles
+        assert env.observation_spec["state"].shape == (3 * n,)
+        assert env.reset(seed=0)["state"].shape == (3 * n,)
 
 
 @pytest.mark.parametrize("env_id", ENV_IDS)

@@ -24,7 +24,7 @@ from vdtn_marl.sim.platoon import PlatoonState
 from vdtn_marl.sim.twin import DigitalTwin
 
 NAMES = sorted(SCENARIOS)
-ENV_IDS = [env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/")]
+ENV_IDS = [env_id for env_id in vdtn_marl.list_envs(api="pettingzoo") if env_id.startswith("vdtn/")]
 CONF = Path(vdtn_marl.__file__).parent / "conf" / "scenario"
 CAM_AGE = VEHICLE_OBS_FEATURES.index("cam_age_ms")
 CAM_DELAY = VEHICLE_OBS_FEATURES.index("cam_delay_ms")

@@ -139,6 +139,8 @@ def _cmd_envs(argv: list[str]) -> int:
                 {
                     **{k: v for k, v in _row(s).items() if k != "clocks"},
                     "clocks": s.clocks,
+                    "api": s.api,
+                    "batched": s.vector_entry_point is not None,
                     "kwargs": s.kwargs,
                     "entry_point": s.entry_point
                     if isinstance(s.entry_point, str)

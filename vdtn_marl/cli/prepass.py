@@ -68,7 +68,10 @@ _LAUNCHERS = {
 _LAUNCHER_PLUGINS = {
     "hydra_plugins.hydra_joblib_launcher": "hydra-joblib-launcher (pip install vdtn-marl)",
     "hydra_plugins.hydra_submitit_launcher": "pip install 'vdtn-marl[slurm]'",
-    "hydra_plugins.hydra_ray_launcher": "see docs/cli.md, section Ray",
+    "hydra_plugins.hydra_ray_launcher": (
+        "pip install 'vdtn-marl[ray]', then pip install --no-deps 'hydra-ray-launcher==1.2.2' "
+        "(docs/cli.md, section Ray)"
+    ),
 }
 
 

@@ -66,6 +66,28 @@ def check_one_trace_choice(trace_source, model_kwargs: dict) -> None:
         )
 
 
+def apply_max_cycles(max_cycles, model_kwargs: dict, *, interval_steps: bool) -> dict:
+    """``model_kwargs`` with PettingZoo's ``max_cycles`` (steps per episode, BenchMARL's
+    PettingZoo tasks pass it) as ``episode_intervals``, for a face whose one step is one control
+    interval (``interval_steps``); a :class:`ConfigError` where a step is a subframe, or where
+    both name the episode length differently."""
+    if max_cycles is None:
+        return model_kwargs
+    if not interval_steps:
+        raise ConfigError(
+            f"max_cycles={max_cycles!r} counts steps of one control interval, and one step of "
+            "this environment is one 1 ms subframe: pass episode_intervals=K (an episode is K "
+            "control intervals of T subframes each)"
+        )
+    given = model_kwargs.get("episode_intervals", max_cycles)
+    if given != max_cycles:
+        raise ConfigError(
+            f"max_cycles={max_cycles!r} and episode_intervals={given!r} both set the episode "
+            "length (max_cycles is an alias of episode_intervals here); pass one of them"
+        )
+    return {**model_kwargs, "episode_intervals": max_cycles}
+
+
 #: The acting parts a face keeps on its :class:`~vdtn_marl.core.interval.IntervalEngine`:
 #: the face's attribute name → the engine's.
 ENGINE_PARTS = {
@@ -239,7 +261,18 @@ class VDTNParallelEnv(EngineBacked, ParallelEnv):
     def close(self):
         pass
 
+    @functools.cached_property
+    def state_space(self) -> gymnasium.spaces.Box:
+        """Space of :meth:`state`: N positions (m), N speeds (m/s, ≥ 0), N accelerations
+        (m/s²; the leader's follows its trace, so no actuator bound applies)."""
+        n = self.twin.params.platoon.num_vehicles
+        low = np.full(3 * n, -np.inf, np.float32)
+        low[n : 2 * n] = 0.0
+        return gymnasium.spaces.Box(low, np.full(3 * n, np.inf, np.float32), dtype=np.float32)
+
     def state(self) -> np.ndarray:
-        """Global state: positions (m), speeds (m/s), accelerations (m/s²) of all vehicles."""
+        """Global state: positions (m), speeds (m/s), accelerations (m/s²) of all vehicles
+        (float32, in :attr:`state_space`)."""
         st = self.twin.platoon
-        return torch.cat([st.position_m[0], st.speed_mps[0], st.accel_mps2[0]]).cpu().numpy()
+        state = torch.cat([st.position_m[0], st.speed_mps[0], st.accel_mps2[0]]).cpu().numpy()
+        return state.astype(np.float32, copy=False)

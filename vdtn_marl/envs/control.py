@@ -15,7 +15,8 @@ reward             per follower: −(|e_p|/ê_p + α|e_v|/ê_v + β|u|/u_max + �
                    collision penalty on the colliding follower. docs/model.md §2.3
 start state        followers at the desired gap and the leader's initial speed, a = 0
 termination        any gap ≤ 0 (collision) ends the episode for every agent
-truncation         after ``episode_intervals`` intervals (default 400 = 20 s)
+truncation         after ``episode_intervals`` intervals (default 400 = 20 s); ``max_cycles``,
+                   PettingZoo's name for it, is accepted as an alias
 =================  ==========================================================================
 
 With ``impaired=True`` every interval's CAMs cross the C-V2X link layer, driven by
@@ -49,6 +50,7 @@ import torch
 from vdtn_marl.core.interval import IntervalEngine
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
+    apply_max_cycles,
     vehicle_action_space,
     vehicle_observation_space,
 )
@@ -105,8 +107,10 @@ class PlatoonControlEnv(VDTNParallelEnv):
         device: str = "cpu",
         completion="none",
         completion_predictor=None,
+        max_cycles: int | None = None,
         **model_kwargs,
     ):
+        model_kwargs = apply_max_cycles(max_cycles, model_kwargs, interval_steps=True)
         super().__init__(
             radio=impaired, seed=seed, render_mode=render_mode, device=device, **model_kwargs
         )

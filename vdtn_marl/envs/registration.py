@@ -10,6 +10,11 @@ entry point in that group is a zero-argument callable that calls :func:`register
 loaded once, on the first call of :func:`make`, :func:`list_envs` or :func:`spec`. A plugin that
 fails emits a :class:`PluginLoadWarning` and is skipped.
 
+Every spec names its ``api``: ``"pettingzoo"`` (a PettingZoo ``ParallelEnv``, most ids) or
+``"gymnasium"`` (a single-agent ``gymnasium.Env``). A spec with a ``vector_entry_point`` also
+has a batched face, made with ``make(id, batch_size=B)`` (the TorchRL ``VDTNTorchRLEnv`` of B
+scenarios for the built-in ids), like Gymnasium's ``vector_entry_point``.
+
 Versions follow Gymnasium's rule: an environment whose default dynamics change gets a new
 ``-vN``, and :func:`make` (and :func:`spec`) of the id it supersedes raises a
 :class:`DeprecatedEnvError` that names the new id, what changed and how to get the old
@@ -29,9 +34,10 @@ from dataclasses import dataclass, field
 from importlib import metadata
 from typing import Any
 
-from vdtn_marl.errors import DeprecatedEnvError, UnknownEnvError
+from vdtn_marl.errors import ConfigError, DeprecatedEnvError, UnknownEnvError
 
 __all__ = [
+    "APIS",
     "ENTRY_POINT_GROUP",
     "DeprecatedEnvError",
     "EnvSpec",
@@ -44,6 +50,10 @@ __all__ = [
 ]
 
 ENTRY_POINT_GROUP = "vdtn_marl.envs"
+
+#: The APIs an environment may follow: ``"pettingzoo"`` (``pettingzoo.ParallelEnv``) or
+#: ``"gymnasium"`` (a single-agent ``gymnasium.Env``).
+APIS = ("pettingzoo", "gymnasium")
 
 _ID_RE = re.compile(r"^[\w.-]+/[\w.-]+-v\d+$")
 _ID_FORM = "'namespace/name-vN' (e.g. 'vdtn/platoon-control-v0')"
@@ -77,6 +87,9 @@ class EnvSpec:
     description: str = ""
     data_source: str = ""
     uses_traces: bool = False
+    api: str = "pettingzoo"
+    vector_entry_point: str | Callable[..., Any] | None = None
+    vector_kwargs: dict[str, Any] = field(default_factory=dict, hash=False)
 
     @property
     def data_sources(self) -> dict[str, dict[str, Any]]:
@@ -94,23 +107,52 @@ class EnvSpec:
 
     def load(self) -> Callable[..., Any]:
         """Return the entry point callable, importing it if it is a ``"module:attr"`` string."""
-        if callable(self.entry_point):
-            return self.entry_point
-        module_name, _, attr_path = self.entry_point.partition(":")
-        try:
-            obj: Any = importlib.import_module(module_name)
-            for part in attr_path.split("."):
-                obj = getattr(obj, part)
-        except (ImportError, AttributeError) as exc:
-            raise ImportError(
-                f"cannot load entry point {self.entry_point!r} of env {self.id!r}: "
-                f"{type(exc).__name__}: {exc}"
-            ) from exc
-        return obj
+        return _load_entry_point(self.entry_point, self.id)
 
     def make(self, **kwargs: Any) -> Any:
         """Instantiate the environment with the registered defaults updated by ``kwargs``."""
         return self.load()(**{**self.kwargs, **kwargs})
+
+    def make_batched(self, batch_size: int, **kwargs: Any) -> Any:
+        """Instantiate the batched face (``vector_entry_point``) of ``batch_size`` scenarios
+        with ``vector_kwargs`` updated by ``kwargs``; a :class:`ConfigError` for an id without
+        one, naming the ids that have one."""
+        if self.vector_entry_point is None:
+            batched = [s.id for s in _REGISTRY.values() if s.vector_entry_point is not None]
+            raise ConfigError(
+                f"env {self.id!r} has no batched face (batch_size={batch_size!r}); ids with "
+                f"one: {', '.join(sorted(batched)) or '(none)'}"
+            )
+        factory = _load_entry_point(self.vector_entry_point, self.id)
+        return factory(**{**self.vector_kwargs, **kwargs, "batch_size": batch_size})
+
+
+def _load_entry_point(entry_point: str | Callable[..., Any], env_id: str) -> Callable[..., Any]:
+    if callable(entry_point):
+        return entry_point
+    module_name, _, attr_path = entry_point.partition(":")
+    try:
+        obj: Any = importlib.import_module(module_name)
+        for part in attr_path.split("."):
+            obj = getattr(obj, part)
+    except (ImportError, AttributeError) as exc:
+        raise ImportError(
+            f"cannot load entry point {entry_point!r} of env {env_id!r}: "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
+    return obj
+
+
+def _check_entry_point(entry_point: object, env_id: str, what: str = "entry point") -> None:
+    if isinstance(entry_point, str):
+        module_name, sep, attr_path = entry_point.partition(":")
+        if not (module_name and sep and attr_path):
+            raise ValueError(
+                f"invalid {what} {entry_point!r} for env {env_id!r}: "
+                "expected 'module.path:ClassName' or a callable"
+            )
+    elif not callable(entry_point):
+        raise TypeError(f"{what} of env {env_id!r} must be a string or a callable")
 
 
 _REGISTRY: dict[str, EnvSpec] = {}
@@ -128,27 +170,29 @@ def register(
     description: str = "",
     data_source: str = "",
     uses_traces: bool = False,
+    api: str = "pettingzoo",
+    vector_entry_point: str | Callable[..., Any] | None = None,
+    vector_kwargs: dict[str, Any] | None = None,
     override: bool = False,
     **defaults: Any,
 ) -> EnvSpec:
     """Register ``env_id``; extra keyword arguments become the default constructor kwargs.
 
     Raises ``ValueError`` for an id not of the form ``namespace/name-vN``, for a malformed
-    entry-point string, and for an id that is already registered (unless ``override=True``).
-    ``uses_traces=True`` marks an environment that takes the ``traces=`` kwarg: its spec lists
-    the trace sets and their provenance (:attr:`EnvSpec.data_sources`).
+    entry-point string, for an ``api`` not in :data:`APIS`, and for an id that is already
+    registered (unless ``override=True``). ``uses_traces=True`` marks an environment that takes
+    the ``traces=`` kwarg: its spec lists the trace sets and their provenance
+    (:attr:`EnvSpec.data_sources`). ``vector_entry_point`` (called with ``batch_size=B``, the
+    ``vector_kwargs`` and the caller's kwargs) is the batched face that
+    ``make(env_id, batch_size=B)`` builds.
     """
     if not isinstance(env_id, str) or not _ID_RE.match(env_id):
         raise ValueError(f"invalid env id {env_id!r}: expected the form {_ID_FORM}")
-    if isinstance(entry_point, str):
-        module_name, sep, attr_path = entry_point.partition(":")
-        if not (module_name and sep and attr_path):
-            raise ValueError(
-                f"invalid entry point {entry_point!r} for env {env_id!r}: "
-                "expected 'module.path:ClassName' or a callable"
-            )
-    elif not callable(entry_point):
-        raise TypeError(f"entry point of env {env_id!r} must be a string or a callable")
+    _check_entry_point(entry_point, env_id)
+    if vector_entry_point is not None:
+        _check_entry_point(vector_entry_point, env_id, "vector entry point")
+    if api not in APIS:
+        raise ValueError(f"api={api!r} of env {env_id!r} must be one of {APIS}")
     if env_id in _REGISTRY and not override:
         raise ValueError(
             f"env id {env_id!r} is already registered "
@@ -170,14 +214,24 @@ def register(
         description=description,
         data_source=data_source,
         uses_traces=bool(uses_traces),
+        api=api,
+        vector_entry_point=vector_entry_point,
+        vector_kwargs=dict(vector_kwargs or {}),
     )
     _REGISTRY[env_id] = env_spec
     return env_spec
 
 
-def make(env_id: str, **kwargs: Any) -> Any:
-    """Create the environment ``env_id``; ``kwargs`` override the registered defaults."""
-    return spec(env_id).make(**kwargs)
+def make(env_id: str, *, batch_size: int | None = None, **kwargs: Any) -> Any:
+    """Create the environment ``env_id``; ``kwargs`` override the registered defaults.
+
+    With ``batch_size=B``, its batched face of B scenarios instead (the spec's
+    ``vector_entry_point``: a TorchRL ``VDTNTorchRLEnv`` for the built-in ids).
+    """
+    env_spec = spec(env_id)
+    if batch_size is None:
+        return env_spec.make(**kwargs)
+    return env_spec.make_batched(batch_size, **kwargs)
 
 
 def spec(env_id: str) -> EnvSpec:
@@ -195,10 +249,14 @@ def spec(env_id: str) -> EnvSpec:
         raise UnknownEnvError(_unknown_message(env_id)) from None
 
 
-def list_envs() -> list[str]:
-    """All registered ids, sorted."""
+def list_envs(api: str | None = None) -> list[str]:
+    """All registered ids, sorted; with ``api`` (one of :data:`APIS`), those of that API."""
     _load_plugins()
-    return sorted(_REGISTRY)
+    if api is None:
+        return sorted(_REGISTRY)
+    if api not in APIS:
+        raise ValueError(f"api={api!r} must be one of {APIS}")
+    return sorted(env_id for env_id, s in _REGISTRY.items() if s.api == api)
 
 
 def _supersede(old_id: str, new_id: str, changes: list[str] | tuple[str, ...], hint: str) -> None:
@@ -268,6 +326,7 @@ TRACES_NOTE = (
     "leader speed trace set, by name (kwarg `traces`, default udds; provenance of each "
     "in EnvSpec.data_sources) or a TraceSource (kwarg `trace_source`)"
 )
+BATCHED = "vdtn_marl.envs.torchrl:VDTNTorchRLEnv"  # make(id, batch_size=B): B scenarios, TorchRL
 
 register(
     "vdtn/platoon-control-v0",
@@ -277,6 +336,8 @@ register(
     description="platoon control, one step = one 50 ms control interval, perfect observation",
     data_source=TRACES_NOTE,
     uses_traces=True,
+    vector_entry_point=BATCHED,
+    vector_kwargs={"mode": "control"},
     impaired=False,
 )
 register(
@@ -291,6 +352,8 @@ register(
     ),
     data_source=TRACES_NOTE,
     uses_traces=True,
+    vector_entry_point=BATCHED,
+    vector_kwargs={"mode": "control_impaired"},
     impaired=True,
 )
 register(
@@ -304,6 +367,8 @@ register(
     ),
     data_source=TRACES_NOTE,
     uses_traces=True,
+    vector_entry_point=BATCHED,
+    vector_kwargs={"mode": "rra"},
 )
 register(
     "vdtn/vdtn-joint-v1",
@@ -319,6 +384,38 @@ register(
     ),
     data_source=TRACES_NOTE,
     uses_traces=True,
+    vector_entry_point=BATCHED,
+    vector_kwargs={"mode": "joint"},
+)
+
+CENTRAL_AGENTS = "one agent: the commands of all followers vehicle_1..vehicle_{N-1} together"
+register(
+    "vdtn/platoon-control-central-v0",
+    "vdtn_marl.envs.central:CentralControlEnv",
+    agents=CENTRAL_AGENTS,
+    clocks={"vehicle": 50},
+    description=(
+        "Gymnasium single-agent face of vdtn/platoon-control-v0: centralised control of all "
+        "followers, one Box action of all commands, one observation vector, team reward"
+    ),
+    data_source=TRACES_NOTE,
+    uses_traces=True,
+    api="gymnasium",
+    impaired=False,
+)
+register(
+    "vdtn/platoon-control-impaired-central-v1",
+    "vdtn_marl.envs.central:CentralControlEnv",
+    agents=CENTRAL_AGENTS,
+    clocks={"vehicle": 50},
+    description=(
+        "Gymnasium single-agent face of vdtn/platoon-control-impaired-v1: centralised control "
+        "of all followers on CAMs that cross the C-V2X link layer"
+    ),
+    data_source=TRACES_NOTE,
+    uses_traces=True,
+    api="gymnasium",
+    impaired=True,
 )
 
 # --- superseded versions -------------------------------------------------------------------
@@ -338,6 +435,8 @@ VERSION_CHANGES: dict[str, tuple[str, ...]] = {
     "vdtn/platoon-control-impaired-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
     "vdtn/v2x-rra-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
     "vdtn/vdtn-joint-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
+    # a face of the impaired dynamics, versioned with them
+    "vdtn/platoon-control-impaired-central-v1": (V1_CHANNEL_CHANGE, V1_RRA_OBSERVATION_CHANGE),
 }
 """Changes of each built-in id against its previous version (what DeprecatedEnvError says)."""
 for _new_id, _changes in VERSION_CHANGES.items():

@@ -45,6 +45,7 @@ from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.base import (
     EngineBacked,
+    apply_max_cycles,
     check_one_trace_choice,
     paid_ivoi_estimator,
     rra_observation_space,
@@ -99,6 +100,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             rollouts from reset also see the platoon mid-episode, where a CAM's content matters
             (at reset the platoon is in equilibrium). A scenario that collides during the
             burn-in starts anew. Must leave at least one interval of the episode.
+        max_cycles: ``"control"``/``"control_impaired"`` only (one step is one control
+            interval there): PettingZoo's name of ``episode_intervals``, accepted as an alias.
         scenario: the world, a name of :data:`vdtn_marl.scenarios.SCENARIOS` (default
             ``"platoon"``: one platoon with predecessor following; ``"two_platoons"``: two
             platoons sharing the cell) or a :class:`~vdtn_marl.scenarios.Scenario`.
@@ -131,10 +134,14 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         completion_predictor=None,
         burn_in_intervals: int = 0,
         scenario: str | Scenario = DEFAULT_SCENARIO,
+        max_cycles: int | None = None,
         **model_kwargs,
     ):
         if mode not in MODES:
             raise ConfigError(f"mode={mode!r} must be one of {MODES}")
+        model_kwargs = apply_max_cycles(
+            max_cycles, model_kwargs, interval_steps=mode in ("control", "control_impaired")
+        )
         b = _batch_size(batch_size)
         dev = resolve_device(device)
         super().__init__(device=dev, batch_size=torch.Size([b]))
@@ -204,6 +211,19 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         self._burn_in_exact: int | None = None  # set by burned_in()
         self._vehicle_obs: torch.Tensor | None = None
         self._make_specs()
+
+    # ------------------------------------------------------------------ groups
+    @property
+    def group_map(self) -> dict[str, list[str]]:
+        """Agent group → its agents' names, in the order of the group's dimension (TorchRL's
+        ``PettingZooWrapper.group_map`` convention): ``{"vehicle": ["vehicle_1", ...]}``,
+        ``{"rra": ["rra_1", ...]}`` or both."""
+        groups = {}
+        if self.has_vehicles:
+            groups["vehicle"] = self.scenario.vehicle_agents(self.twin.topology)
+        if self.has_rra:
+            groups["rra"] = self.scenario.rra_agents(self.twin.topology)
+        return groups
 
     # ------------------------------------------------------------------ specs
     def _make_specs(self) -> None:

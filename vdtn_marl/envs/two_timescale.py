@@ -50,6 +50,7 @@ from vdtn_marl.core.interval import IntervalEngine, check_estimator_has_control
 from vdtn_marl.core.reward import RRAReward
 from vdtn_marl.envs.base import (
     VDTNParallelEnv,
+    apply_max_cycles,
     paid_ivoi_estimator,
     rra_action_space,
     rra_observation_space,
@@ -83,8 +84,10 @@ class TwoTimescaleEnv(VDTNParallelEnv):
         device: str = "cpu",
         completion="none",
         completion_predictor=None,
+        max_cycles: int | None = None,
         **model_kwargs,
     ):
+        apply_max_cycles(max_cycles, model_kwargs, interval_steps=False)  # refused: subframes
         reward_fn = RRAReward(
             reward, kappa1, kappa2, throughput_scale, ivoi_scale, miss_penalty, aoi_scale
         )
