@@ -149,3 +149,55 @@ def test_pairing_differences_are_taken_seed_by_seed():
     assert (last["diff_min"], last["diff_max"]) == pytest.approx((-0.10, 0.05))
     assert last["cpu_ratio_new_to_old"] == pytest.approx((0.5 + 0.25) / 2)
     assert pairing.pair_rows(runs, "pi_tilde") == []
+
+
+timings = _script("paper_stage_timings.py")
+
+
+def _fake_run(path: Path, seconds: dict[tuple[int, str], list[float]], evaluate: list[float]):
+    path.mkdir()
+    lines = ["jocc_iteration,stage,iteration,frames,seconds"]
+    for (jocc_iteration, stage), values in seconds.items():
+        frames = 64_000 if stage == "rra" else 25_600
+        lines += [f"{jocc_iteration},{stage},{i},{frames},{s}" for i, s in enumerate(values)]
+    (path / "metrics.csv").write_text("\n".join(lines) + "\n")
+    (path / "jocc.log").write_text(
+        "".join(
+            f"[x] - JOCC iteration {i}, stage evaluate done in {s} s\n"
+            for i, s in enumerate(evaluate)
+        )  # fmt: skip
+    )
+    (path / "config.yaml").write_text("algo:\n  num_envs: 256\n  rollout_steps: 100\n")
+
+
+def test_paper_stage_timings_reads_runs_and_extrapolates(tmp_path):
+    _fake_run(
+        tmp_path / "run",
+        {
+            (0, "control_perfect"): [9.0, 2.0, 4.0],  # the first fits the scaling: left out
+            (0, "control_impaired"): [20.0, 6.0],
+            (1, "control_impaired"): [12.0, 14.0],  # learned RRA: every iteration counts
+            (0, "rra"): [5.0, 3.0],
+        },
+        evaluate=[30.0, 50.0],
+    )
+    run = timings.read_run(tmp_path / "run")
+    stages = run["stages"]
+    assert stages["pi_star"]["seconds_per_iteration"] == 3.0
+    assert stages["pi_tilde_random"]["seconds_per_iteration"] == 6.0
+    assert stages["pi_tilde_learned"]["seconds_per_iteration"] == 13.0
+    assert stages["rra"]["frames_per_s"] == pytest.approx(64_000 / 3.0)
+    assert run["batch"]["num_envs"] == 256 and run["evaluate_s"] == [30.0, 50.0]
+    est = timings.paper_iteration(run, control_iterations=10, rra_iterations=4)
+    assert est["first_s"] == pytest.approx(10 * (3.0 + 6.0) + 4 * 3.0 + 40.0)
+    assert est["later_s"] == pytest.approx(10 * (3.0 + 13.0) + 4 * 3.0 + 40.0)
+
+
+def test_paper_stage_timings_refuses_bad_arguments(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        timings.parse_args([f"old={tmp_path}"])  # no metrics.csv there
+    assert "metrics.csv" in capsys.readouterr().err
+    _fake_run(tmp_path / "run", {(0, "rra"): [1.0]}, [])
+    with pytest.raises(SystemExit):
+        timings.parse_args([f"new={tmp_path / 'run'}", "--cpu-share", "new=300/100"])
+    assert "--cpu-share" in capsys.readouterr().err
