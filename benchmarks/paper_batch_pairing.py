@@ -22,7 +22,8 @@ Arms run interleaved (seed 0 old, seed 0 new, seed 1 old, ...). The table prints
 and evaluation point, the control cost of each arm (mean over seeds) and the paired
 difference new − old (mean, min and max over seeds; negative: the new shape learned more per
 frame), and each arm's median CPU seconds per iteration and their ratio (per wall-time
-learning). The JSON keeps every evaluation, the command, the date and the load average.
+learning). The JSON keeps every evaluation, the command, the date and the load average; it is
+rewritten after every arm (``complete`` says whether every arm ran).
 """
 
 from __future__ import annotations
@@ -189,12 +190,33 @@ def main(argv=None) -> int:
     torch.set_num_threads(1)
     load_start = os.getloadavg()
     runs = []
+
+    def write(rows: list[dict]) -> None:
+        atomic_write_json(
+            args.out,
+            {
+                **provenance("paper_batch_pairing"),
+                "load_average_start": load_start,
+                "load_average_end": os.getloadavg(),
+                "old": args.old,
+                "new": args.new,
+                "iterations": args.iterations,
+                "eval_every": args.eval_every,
+                "eval_episodes": args.eval_episodes,
+                "eval_seed": EVAL_SEED,
+                "complete": len(runs) == 2 * len(args.stages) * len(args.seeds),
+                "rows": rows,
+                "runs": runs,
+            },
+        )
+
     for stage in args.stages:
         for seed in args.seeds:
             for arm in ("old", "new"):
                 shape = getattr(args, arm)
                 run = {**run_arm(stage, seed, shape, args), "arm": arm}
                 runs.append(run)
+                write([row for s in args.stages for row in pair_rows(runs, s)])  # so far
                 last = run["evaluations"][-1]
                 print(
                     f"{stage:<8} seed {seed} {arm} {shape[0]}x{shape[1]}: cost "
@@ -215,22 +237,7 @@ def main(argv=None) -> int:
             f"{row['diff_min']:>+9.4f} {row['diff_max']:>+9.4f} "
             f"{row['cpu_ratio_new_to_old']:>11.2f}"
         )
-    atomic_write_json(
-        args.out,
-        {
-            **provenance("paper_batch_pairing"),
-            "load_average_start": load_start,
-            "load_average_end": os.getloadavg(),
-            "old": args.old,
-            "new": args.new,
-            "iterations": args.iterations,
-            "eval_every": args.eval_every,
-            "eval_episodes": args.eval_episodes,
-            "eval_seed": EVAL_SEED,
-            "rows": rows,
-            "runs": runs,
-        },
-    )
+    write(rows)
     print(f"wrote {args.out}")
     return 0
 

@@ -401,6 +401,10 @@ def main(argv=None) -> int:
             result = spawn(cell)
             result.update(cell, repeat=repeat)
             runs.append(result)
+            # the cells so far, in case the sweep is stopped (the summary replaces it)
+            atomic_write_json(
+                args.out, {**provenance("stage_throughput"), "complete": False, "runs": runs}
+            )
             shown = result.get("frames_per_s", result.get("seconds"))
             print(
                 f"[{repeat}] {cell['stage']:<17} B={cell['batch']}: {shown:,.1f} "
@@ -424,6 +428,7 @@ def main(argv=None) -> int:
         "rows": rows,
         "estimate": estimate(rows, chosen, budgets),
         "estimate_cpu": estimate(rows, chosen, budgets, cpu=True),
+        "complete": True,
         "peak_rss_mb": max(r["peak_rss_mb"] for r in runs),
         "runs": runs,
     }
