@@ -5,9 +5,10 @@ from __future__ import annotations
 import pytest
 import torch
 from tensordict import TensorDict
-from torchrl.data import Bounded, Composite
+from torchrl.data import Bounded, Categorical, Composite
 
-from vdtn_marl.algos.networks import ObservationScaler, make_critic
+from vdtn_marl.algos.networks import CategoricalMode, ObservationScaler, make_actor, make_critic
+from vdtn_marl.algos.ppo import ActorPolicy
 
 N_AGENTS, N_OBS = 3, 4
 
@@ -71,3 +72,66 @@ def test_observation_scaler_standardises_and_masks():
     z = scaler(data)
     assert z[:, 0].mean().abs() < 1e-4 and (z[:, 0].std() - 1).abs() < 1e-2
     assert (z[:, 2] == 0).all()
+
+
+N_ACTIONS = 6
+
+
+def _discrete_actor(share_params: bool = True):
+    actions = Composite(
+        {
+            "agents": Composite(
+                {"action": Categorical(N_ACTIONS, shape=(N_AGENTS,))}, shape=(N_AGENTS,)
+            )
+        }
+    )
+    return make_actor(_spec(), actions, "agents", share_params=share_params)
+
+
+@pytest.mark.parametrize("scale", [0.1, 1.0, 30.0])
+def test_fast_categorical_mode_gives_the_actors_own_deterministic_actions(scale):
+    """The RRA policy's fast path returns, bit for bit, what the ProbabilisticActor does under
+    InteractionType.DETERMINISTIC (the slow path, ``ActorPolicy.action``), also where the
+    logits are far apart (large scale) and where several are tied (zero last layer)."""
+    torch.manual_seed(1)
+    actor = _discrete_actor()
+    policy = ActorPolicy(actor, "agents")
+    assert policy.mode is not None
+    observation = (torch.rand(4096, N_AGENTS, N_OBS) * 2 - 1) * scale
+    fast = policy(observation)
+    assert fast.dtype == torch.long and fast.shape == (4096, N_AGENTS)
+    assert torch.equal(fast, policy.action(observation))
+    assert len(fast.unique()) > 1  # the comparison covers several actions
+    with torch.no_grad():  # ties: every logit equal, the mode is the first action
+        for name, value in actor.named_parameters():
+            if name.endswith("4.weight") or name.endswith("4.bias"):
+                value.zero_()
+    assert torch.equal(policy(observation), policy.action(observation))
+    assert (policy(observation) == 0).all()
+
+
+def test_fast_categorical_mode_reads_the_current_weights():
+    """Weights loaded or trained after the policy was made are the ones it acts with."""
+    torch.manual_seed(2)
+    actor, other = _discrete_actor(), _discrete_actor()
+    policy = ActorPolicy(actor, "agents")
+    observation = torch.rand(512, N_AGENTS, N_OBS) * 2 - 1
+    before = policy(observation)
+    actor.load_state_dict(other.state_dict())
+    after = policy(observation)
+    assert not torch.equal(before, after)
+    assert torch.equal(after, ActorPolicy(other, "agents").action(observation))
+
+
+def test_fast_categorical_mode_only_for_shared_discrete_actors():
+    """Actors with a parameter set per agent, continuous actors and stochastic policies keep
+    the actor's own path; so does an observation of the wrong shape (the actor names it)."""
+    assert CategoricalMode.of(_discrete_actor(share_params=False)) is None
+    box = Bounded(low=-1.0, high=1.0, shape=(N_AGENTS, 1))
+    continuous = make_actor(
+        _spec(), Composite({"agents": Composite({"action": box}, shape=(N_AGENTS,))}), "agents"
+    )
+    assert CategoricalMode.of(continuous) is None
+    assert ActorPolicy(_discrete_actor(), "agents", deterministic=False).mode is None
+    with pytest.raises((RuntimeError, ValueError)):
+        ActorPolicy(_discrete_actor(), "agents")(torch.zeros(2, N_AGENTS + 1, N_OBS))

@@ -48,7 +48,7 @@ from tensordict.nn import InteractionType, set_interaction_type
 from torchrl.envs import EnvBase
 from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
-from vdtn_marl.algos.networks import make_actor, make_critic, scalers
+from vdtn_marl.algos.networks import CategoricalMode, make_actor, make_critic, scalers
 from vdtn_marl.algos.params import AlgoConfig
 
 #: Iteration seeds are spread so that no two iterations (or two runs with nearby seeds) share
@@ -251,7 +251,9 @@ class PPOTrainer:
             )
             if self.active is not None:
                 self._mask_advantage(data)
-        flat = data.reshape(-1)
+        # minibatches gather only what the loss reads once GAE is done (not the next step's
+        # observations, rewards and flags, nor the collecting policy's loc and scale)
+        flat = data.reshape(-1).select(*self._minibatch_keys(), strict=False)
         n = flat.shape[0]
         size = min(self.algo.minibatch_size, n)
         sums = dict.fromkeys(LOSS_KEYS + HEALTH_KEYS, 0.0)
@@ -271,6 +273,13 @@ class PPOTrainer:
                     sums[key] += math.nan if value is None else float(value.detach().mean())
                 steps += 1
         return {key: value / max(steps, 1) for key, value in sums.items()}
+
+    def _minibatch_keys(self) -> list:
+        """The keys the clipped loss reads from a minibatch: its inputs at the current step
+        (observation, action, the collecting policy's log-probability) and GAE's outputs."""
+        keys = self.loss.tensor_keys
+        now = [k for k in self.loss.in_keys if not (isinstance(k, tuple) and k[0] == "next")]
+        return list(dict.fromkeys([*now, keys.advantage, keys.value_target, keys.value]))
 
     def _mask_advantage(self, data: TensorDictBase) -> None:
         """Standardise the advantage [..., n, 1] over the active agent-steps of each agent and
@@ -434,7 +443,10 @@ class ActorPolicy:
 
     Deterministic by default (the mode of the action distribution); continuous actions come
     back as float m/s², discrete ones as long indices. This is how a learned policy is handed
-    to an environment as ``rra_policy`` or ``control_module``.
+    to an environment as ``rra_policy`` or ``control_module``. A deterministic discrete actor
+    with shared parameters (the RRA policy, called every subframe) is evaluated straight from
+    its layers (:class:`~vdtn_marl.algos.networks.CategoricalMode`, the same actions bit for
+    bit).
     """
 
     def __init__(self, actor, group: str, deterministic: bool = True):
@@ -443,9 +455,14 @@ class ActorPolicy:
         self.interaction = (
             InteractionType.DETERMINISTIC if deterministic else InteractionType.RANDOM
         )
+        self.mode = CategoricalMode.of(actor) if deterministic else None
 
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        if self.mode is not None:
+            observation = torch.as_tensor(observation, dtype=torch.float32)
+            if self.mode.accepts(observation):
+                return self.mode(observation)
         return self.action(observation)
 
     def action(self, observation: torch.Tensor) -> torch.Tensor:

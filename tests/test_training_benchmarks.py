@@ -1,0 +1,203 @@
+"""The arithmetic of the training-throughput benchmarks (stage_throughput.py and
+paper_batch_pairing.py): ratios in the same repeat, the size choice, the iteration estimate,
+the paired differences and the refusal of bad arguments. The timed runs themselves are
+benchmarks, never tests."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _script(name: str):
+    spec = importlib.util.spec_from_file_location(f"_bench_{name}", ROOT / "benchmarks" / name)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+stages = _script("stage_throughput.py")
+pairing = _script("paper_batch_pairing.py")
+
+
+def _run(stage, batch, repeat, seconds, cpu_seconds, frames=25_600):
+    return {
+        "stage": stage,
+        "batch": batch,
+        "repeat": repeat,
+        "frames_per_s": frames / seconds,
+        "collect_frames_per_s": 2 * frames / seconds,
+        "seconds_per_iteration": seconds,
+        "scaling_s": 1.0,
+        "scaling_cpu_s": 0.5,
+        "frames_per_cpu_s": frames / cpu_seconds,
+        "cpu_seconds_per_iteration": cpu_seconds,
+        "update_s": [0.25],
+        "rollout_steps": frames // batch,
+        "frames_per_iteration": frames,
+        "peak_rss_mb": 100.0 + batch,
+    }
+
+
+def test_ratios_are_taken_against_the_reference_of_the_same_repeat():
+    runs = [
+        _run("pi_star", 64, 0, 10.0, 8.0),
+        _run("pi_star", 256, 0, 5.0, 2.0),  # 2x (wall) and 4x (CPU) the reference of repeat 0
+        _run("pi_star", 64, 1, 20.0, 8.0),  # a slow repeat: the machine was busy
+        _run("pi_star", 256, 1, 8.0, 4.0),  # 2.5x and 2x the reference of repeat 1
+    ]
+    rows = {row["batch"]: row for row in stages.summarise("pi_star", runs, reference=64)}
+    assert rows[64]["ratio_to_reference"] == 1.0
+    assert rows[256]["ratio_to_reference"] == pytest.approx((2.0 + 2.5) / 2)
+    assert rows[256]["cpu_ratio_to_reference"] == pytest.approx((4.0 + 2.0) / 2)
+    assert rows[256]["seconds_per_iteration"] == pytest.approx(6.5)
+    assert rows[256]["peak_rss_mb"] == 356.0
+
+
+def _rows(seconds: dict[int, float]) -> list[dict]:
+    rows = []
+    for stage in stages.CONTROL_STAGES:
+        runs = [_run(stage, b, 0, s, s / 2) for b, s in seconds.items()]
+        rows += stages.summarise(stage, runs, reference=64)
+    return rows
+
+
+def test_the_choice_is_the_fastest_size_with_long_enough_rollouts():
+    args = stages.parse_args(["--control-batches", "64,256,512"])
+    rows = _rows({64: 10.0, 256: 4.0, 512: 3.0})  # 512: rollouts of 50 intervals
+    assert stages._choice(args, rows) == {"control": 256}
+    args = stages.parse_args(["--control-batches", "64,256,512", "--min-control-rollout", "50"])
+    assert stages._choice(args, rows) == {"control": 512}
+    args = stages.parse_args(["--choose", "control=64"])
+    assert stages._choice(args, rows) == {"control": 64}
+
+
+def test_the_iteration_estimate_adds_each_stages_budget():
+    rows = _rows({64: 10.0, 256: 4.0})
+    rows += stages.summarise("rra", [_run("rra", 128, 0, 3.0, 2.0, frames=64_000)], 128)
+    rows.append({"stage": "evaluate", "batch": None, "seconds": 60.0, "cpu_seconds": 50.0,
+                 "checkpoint_s": 0.5})  # fmt: skip
+    rows.append({"stage": "warm_start", "batch": None, "seconds": 100.0, "cpu_seconds": 90.0})
+    budgets = {"control_iterations": 10, "rra_iterations": 5, "checkpoints": 4}
+    est = stages.estimate(rows, {"control": 256, "rra": 128}, budgets)
+    # first: warm start, π* and π̃ (random RRA) with their scaling fits, RRA, evaluation, saves
+    first = 100.0 + 2 * (10 * 4.0 + 1.0) + (5 * 3.0 + 1.0) + 60.0 + 4 * 0.5
+    assert est["first_iteration_s"] == pytest.approx(first)
+    # later: π* and π̃ (learned RRA), RRA, evaluation, saves; no warm start, no scaling fits
+    assert est["later_iteration_s"] == pytest.approx(2 * 10 * 4.0 + 5 * 3.0 + 60.0 + 2.0)
+    assert est["missing"] == []
+    cpu = stages.estimate(rows, {"control": 256, "rra": 128}, budgets, cpu=True)
+    assert cpu["later_iteration_s"] == pytest.approx(2 * 10 * 2.0 + 5 * 2.0 + 50.0 + 2.0)
+    assert stages.estimate(rows, {"control": 512}, budgets)["missing"][:3] == list(
+        stages.CONTROL_STAGES
+    )
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["--control-batches", "64,300"], "--control-batches"),  # 25,600 / 300 is no whole
+        (["--rra-batches", "0"], "--rra-batches"),
+        (["--stages", "pi_star,warp"], "--stages"),
+    ],
+)
+def test_stage_throughput_refuses_bad_arguments(argv, flag, capsys):
+    with pytest.raises(SystemExit) as refused:
+        stages.parse_args(argv)
+    assert flag in capsys.readouterr().err + str(refused.value.code)
+
+
+@pytest.mark.parametrize(
+    ("argv", "flag"),
+    [
+        (["--new", "256x50"], "--new"),  # fewer samples per iteration than the old arm
+        (["--old", "64"], "--old"),
+        (["--eval-every", "0"], "--eval-every"),
+    ],
+)
+def test_pairing_refuses_bad_arguments(argv, flag, capsys):
+    with pytest.raises(SystemExit) as refused:
+        pairing.parse_args(argv)
+    assert flag in capsys.readouterr().err + str(refused.value.code)
+
+
+def test_pairing_differences_are_taken_seed_by_seed():
+    def arm(arm, seed, costs, cpu):
+        evaluations = [
+            {"iteration": 10 * i, "frames": 256_000 * i, "control_cost": c}
+            for i, c in enumerate(costs)
+        ]
+        return {"stage": "pi_star", "arm": arm, "seed": seed, "evaluations": evaluations,
+                "cpu_s_per_iteration": cpu}  # fmt: skip
+
+    runs = [
+        arm("old", 0, [0.5, 0.30], 4.0),
+        arm("new", 0, [0.5, 0.20], 2.0),
+        arm("old", 1, [0.6, 0.40], 4.0),
+        arm("new", 1, [0.6, 0.45], 1.0),
+    ]
+    rows = pairing.pair_rows(runs, "pi_star")
+    assert [row["iteration"] for row in rows] == [0, 10]
+    assert rows[0]["diff_mean"] == 0.0
+    last = rows[-1]
+    assert last["cost_old"] == pytest.approx(0.35) and last["cost_new"] == pytest.approx(0.325)
+    assert last["diff_mean"] == pytest.approx(-0.025)
+    assert (last["diff_min"], last["diff_max"]) == pytest.approx((-0.10, 0.05))
+    assert last["cpu_ratio_new_to_old"] == pytest.approx((0.5 + 0.25) / 2)
+    assert pairing.pair_rows(runs, "pi_tilde") == []
+
+
+timings = _script("paper_stage_timings.py")
+
+
+def _fake_run(path: Path, seconds: dict[tuple[int, str], list[float]], evaluate: list[float]):
+    path.mkdir()
+    lines = ["jocc_iteration,stage,iteration,frames,seconds"]
+    for (jocc_iteration, stage), values in seconds.items():
+        frames = 64_000 if stage == "rra" else 25_600
+        lines += [f"{jocc_iteration},{stage},{i},{frames},{s}" for i, s in enumerate(values)]
+    (path / "metrics.csv").write_text("\n".join(lines) + "\n")
+    (path / "jocc.log").write_text(
+        "".join(
+            f"[x] - JOCC iteration {i}, stage evaluate done in {s} s\n"
+            for i, s in enumerate(evaluate)
+        )  # fmt: skip
+    )
+    (path / "config.yaml").write_text("algo:\n  num_envs: 256\n  rollout_steps: 100\n")
+
+
+def test_paper_stage_timings_reads_runs_and_extrapolates(tmp_path):
+    _fake_run(
+        tmp_path / "run",
+        {
+            (0, "control_perfect"): [9.0, 2.0, 4.0],  # the first fits the scaling: left out
+            (0, "control_impaired"): [20.0, 6.0],
+            (1, "control_impaired"): [12.0, 14.0],  # learned RRA: every iteration counts
+            (0, "rra"): [5.0, 3.0],
+        },
+        evaluate=[30.0, 50.0],
+    )
+    run = timings.read_run(tmp_path / "run")
+    stages = run["stages"]
+    assert stages["pi_star"]["seconds_per_iteration"] == 3.0
+    assert stages["pi_tilde_random"]["seconds_per_iteration"] == 6.0
+    assert stages["pi_tilde_learned"]["seconds_per_iteration"] == 13.0
+    assert stages["rra"]["frames_per_s"] == pytest.approx(64_000 / 3.0)
+    assert run["batch"]["num_envs"] == 256 and run["evaluate_s"] == [30.0, 50.0]
+    est = timings.paper_iteration(run, control_iterations=10, rra_iterations=4)
+    assert est["first_s"] == pytest.approx(10 * (3.0 + 6.0) + 4 * 3.0 + 40.0)
+    assert est["later_s"] == pytest.approx(10 * (3.0 + 13.0) + 4 * 3.0 + 40.0)
+
+
+def test_paper_stage_timings_refuses_bad_arguments(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        timings.parse_args([f"old={tmp_path}"])  # no metrics.csv there
+    assert "metrics.csv" in capsys.readouterr().err
+    _fake_run(tmp_path / "run", {(0, "rra"): [1.0]}, [])
+    with pytest.raises(SystemExit):
+        timings.parse_args([f"new={tmp_path / 'run'}", "--cpu-share", "new=300/100"])
+    assert "--cpu-share" in capsys.readouterr().err
