@@ -242,6 +242,9 @@ class DigitalTwin:
             offsets = torch.tensor(topology.lateral_offset_m, device=self.device)
             self._lateral_offset_m = ns.from_torch(offsets)
         self._decode = ns.from_torch(link.ActionTables.build(rp, self.device))
+        #: the torch path's draws and scratch, reused every interval (not state)
+        self._workspace = link.FadingWorkspace()
+        self.tables: link.IntervalTables | None = None
         self._const = ns.from_torch(
             link.KernelConstants.build(
                 rp, pp.subframe_s, self.batch_size, self.num_links, self.device
@@ -361,11 +364,13 @@ class DigitalTwin:
         if not self.radio_enabled:
             return
         b, rp, t = self.batch_size, self.params.radio, self.subframes_per_interval
-        tables = self._draw_interval_tables()
+        # all scenarios start over: the torch path overwrites the last interval's buffers
+        reuse = keep is None and not ns.numpy
+        tables = self._draw_interval_tables(reuse)
         link_state = link.new_link_state(
             b, self.num_links, self.num_subchannels, rp, t, ns.array_device
         )
-        obs = self._rra_observation_buffer(tables)
+        obs = self._rra_observation_buffer(tables, reuse)
         v2i_sum = ns.zeros((b, self.num_subchannels))
         if keep is not None:  # the others keep their interval: tables, CAM progress, ...
 
@@ -395,7 +400,7 @@ class DigitalTwin:
             v2i_sum,
         )
 
-    def _draw_interval_tables(self) -> link.IntervalTables:
+    def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
         x = self._platoon.position_m
         moved = abs(x - self._shadow_position_m)
@@ -427,19 +432,31 @@ class DigitalTwin:
             rp,
         )
         return link.build_interval_tables(
-            v2v_db, v2i_db, rp, self.subframes_per_interval, g, self.topology
+            v2v_db,
+            v2i_db,
+            rp,
+            self.subframes_per_interval,
+            g,
+            self.topology,
+            workspace=self._workspace,
+            out=self.tables if reuse else None,
         )
 
-    def _rra_observation_buffer(self, tables: link.IntervalTables):
+    def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
         occupancy and bits left (filled per subframe), time left, the recipients' control
         state and the features that predict their IVoI (constant over the interval).
 
-        In the backend's arrays.
+        In the backend's arrays; with ``reuse`` (torch) written over the last interval's.
         """
         t, b, n_l = self.subframes_per_interval, self.batch_size, self.num_links
         pp, lay, platoon = self.params.platoon, self.rra_layout, self._platoon
-        csi = link.rra_static_observation(tables, self.params.radio, self._const.noise_mw)
+        shape = (t, b, n_l, self.rra_obs_dim)
+        old = getattr(self, "_rra_obs", None)
+        if reuse and old is not None and tuple(old.shape) == shape and old.is_contiguous():
+            obs = old
+        else:
+            obs = self.ns.empty(shape)
         gap_error, speed_error = spacing_errors(platoon, pp)
         control = clamp(
             stack(
@@ -457,15 +474,27 @@ class DigitalTwin:
         history = clamp(
             self._command_history / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
         )
-        obs = self.ns.empty((t, b, n_l, self.rra_obs_dim))
-        obs[..., lay.csi] = csi
-        obs[..., lay.occupancy] = 0.0
-        obs[..., lay.bits_left] = 1.0
+        # one subframe's slot [B, L, D], copied to all T (one contiguous copy, not a strided
+        # write per feature); the CSI and the time left are written over it
+        slot = self.ns.empty((b, n_l, self.rra_obs_dim))
+        slot[..., lay.csi] = 0.0
+        slot[..., lay.occupancy] = 0.0
+        slot[..., lay.bits_left] = 1.0
+        slot[..., lay.time_left] = 0.0
+        slot[..., lay.control] = control
+        slot[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
+        slot[..., lay["cam_delay_history"]] = self._cam_delay_history
+        slot[..., lay["command_history"]] = history
+        obs[...] = slot
         obs[..., lay.time_left] = self._time_left[:, None, None]
-        obs[..., lay.control] = control
-        obs[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
-        obs[..., lay["cam_delay_history"]] = self._cam_delay_history
-        obs[..., lay["command_history"]] = history
+        if self.ns.numpy:
+            obs[..., lay.csi] = link.rra_static_observation(
+                tables, self.params.radio, self._const.noise_mw
+            )
+        else:
+            link.fill_rra_static_observation(
+                tables, self.params.radio, self._const.noise_mw, obs[..., lay.csi], self._workspace
+            )
         return obs
 
     # ------------------------------------------------------------------ subframes
