@@ -60,6 +60,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seconds", type=float, default=4.0, help="timed seconds per B")
     p.add_argument("--threads", type=int, default=1, help="torch intra-op threads")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--fading-draws",
+        choices=("normal", "exponential"),
+        default="normal",
+        help="the twin's fast-fading draws (DigitalTwin fading_draws)",
+    )
     p.add_argument("--out", type=Path, default=Path("benchmarks/results/profile_core.json"))
     args = p.parse_args(argv)
     if any(b < 1 for b in args.batch_sizes):
@@ -83,11 +89,13 @@ def _sync(device: torch.device) -> None:
 class CoreDriver:
     """The throughput benchmark's loop over a twin, one phase at a time."""
 
-    def __init__(self, batch: int, device: str, seed: int):
+    def __init__(self, batch: int, device: str, seed: int, fading_draws: str = "normal"):
         from vdtn_marl.policies.cacc import CACCController
         from vdtn_marl.sim.twin import DigitalTwin
 
-        self.twin = DigitalTwin(batch_size=batch, device=device, seed=seed)
+        self.twin = DigitalTwin(
+            batch_size=batch, device=device, seed=seed, fading_draws=fading_draws
+        )
         self.device = self.twin.device
         self.controller = CACCController(self.twin.params.platoon)
         self.generator = torch.Generator(device=self.device)
@@ -124,8 +132,10 @@ class CoreDriver:
                 times[phase] += time.perf_counter() - begin
 
 
-def profile_batch(batch: int, device: str, seconds: float, intervals: int, seed: int) -> dict:
-    driver = CoreDriver(batch, device, seed)
+def profile_batch(
+    batch: int, device: str, seconds: float, intervals: int, seed: int, fading_draws: str
+) -> dict:
+    driver = CoreDriver(batch, device, seed, fading_draws)
     twin = driver.twin
     driver.interval()  # warm-up: buffers, caches
     _sync(driver.device)
@@ -165,13 +175,14 @@ def profile_batch(batch: int, device: str, seconds: float, intervals: int, seed:
 def _phase_ops(prof, phase: str, intervals: int) -> list[dict]:
     """The operators called (directly or not) under ``phase``: self CPU time per interval and
     share, calls per interval, most expensive first."""
-    events = prof.events()
-    windows = [(e.time_range.start, e.time_range.end) for e in events if e.name == phase]
     totals: dict[str, list[float]] = {}
-    for e in events:
-        if e.name in PHASES or not e.name.startswith("aten::"):
+    for e in prof.events():
+        if not e.name.startswith("aten::"):
             continue
-        if any(lo <= e.time_range.start and e.time_range.end <= hi for lo, hi in windows):
+        parent = e.cpu_parent
+        while parent is not None and parent.name != phase:
+            parent = parent.cpu_parent
+        if parent is not None:
             entry = totals.setdefault(e.name, [0.0, 0])
             entry[0] += e.self_cpu_time_total
             entry[1] += 1
@@ -282,7 +293,11 @@ def main(argv=None) -> int:
     results = []
     for batch in args.batch_sizes:
         print(f"profiling B = {batch} on {args.device} ...", flush=True)
-        results.append(profile_batch(batch, args.device, args.seconds, args.intervals, args.seed))
+        results.append(
+            profile_batch(
+                batch, args.device, args.seconds, args.intervals, args.seed, args.fading_draws
+            )
+        )
     limits_after = machine_limits(args.device, args.seed)
     load_after = os.getloadavg()
     text = report(results, limits)
@@ -298,6 +313,7 @@ def main(argv=None) -> int:
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
         "device": args.device,
+        "fading_draws": args.fading_draws,
         "device_name": (
             torch.cuda.get_device_name(torch.device(args.device))
             if args.device.startswith("cuda")

@@ -480,3 +480,32 @@ def test_link_major_kernel_equals_the_batched_formulation_bit_for_bit(vehicles, 
             assert torch.equal(a, b)
         checked += int((out.v2v_power_mw > 0).sum())
     assert checked > 0
+
+
+def test_exponential_fading_draws_have_the_rayleigh_law_and_reproduce_by_seed():
+    """fading_draws="exponential": |h|² ~ Exp(1) (mean 1, variance 1, P(|h|² > 2) = e⁻²),
+    the same tables on both backends and for the same seed, other numbers than "normal"."""
+    gains = {}
+    for draws in ("normal", "exponential"):
+        twin = DigitalTwin(batch_size=512, seed=5, fading_draws=draws)
+        # own gain / its large-scale factor: the fading alone, 50 × 512 × 3 × 4 draws
+        own = twin.tables.own_gain.double()
+        gains[draws] = fading = own / own.mean(dim=0, keepdim=True)
+        assert fading.mean().item() == pytest.approx(1.0, abs=0.01)
+    exponential = DigitalTwin(batch_size=512, seed=5, fading_draws="exponential").tables
+    again = DigitalTwin(batch_size=512, seed=5, fading_draws="exponential").tables
+    assert torch.equal(exponential.cross_gain, again.cross_gain)
+    assert not torch.equal(gains["normal"], gains["exponential"])
+    raw = DigitalTwin(batch_size=1, seed=9, fading_draws="exponential")
+    draws = channel.rayleigh_power_gain_exponential((400_000,), raw.generator).astype(np.float64)
+    assert draws.mean() == pytest.approx(1.0, abs=0.01)
+    assert draws.var() == pytest.approx(1.0, abs=0.02)
+    assert (draws > 2.0).mean() == pytest.approx(math.exp(-2.0), abs=0.003)
+    numpy_twin = DigitalTwin(batch_size=1, seed=6, backend="numpy", fading_draws="exponential")
+    torch_twin = DigitalTwin(batch_size=1, seed=6, backend="torch", fading_draws="exponential")
+    for field in dataclasses.fields(link.IntervalTables):
+        np.testing.assert_array_equal(
+            getattr(numpy_twin.tables, field.name), getattr(torch_twin.tables, field.name).numpy()
+        )
+    with pytest.raises(ConfigError, match="fading_draws"):
+        DigitalTwin(batch_size=1, fading_draws="uniform")

@@ -29,8 +29,10 @@ import torch
 
 from vdtn_marl.sim.backend import Array, cat, clamp, log10, sum_axis
 from vdtn_marl.sim.channel import (
+    FADING_DRAWS,
     db_to_linear,
     rayleigh_power_gain,
+    rayleigh_power_gain_exponential,
 )
 from vdtn_marl.sim.layout import RRA_OBS_GAIN_CLIP, RRA_OBS_GAIN_SCALE_DB
 from vdtn_marl.sim.params import RadioParams
@@ -220,6 +222,7 @@ def build_interval_tables(
     topology: Topology,
     workspace: FadingWorkspace | None = None,
     out: IntervalTables | None = None,
+    fading_draws: str = "normal",
 ) -> IntervalTables:
     """Draw the interval's Rayleigh fading and assemble the linear tables.
 
@@ -231,6 +234,11 @@ def build_interval_tables(
     normals, W = 3LM + L² + M gains per scenario and subframe), so that a seeded generator
     reproduces the same tables. With NumPy gains (the single-scenario fast path) the fading is
     drawn with the same torch generator and the tables are NumPy arrays.
+
+    ``fading_draws="exponential"`` draws each gain as one Exp(1) number
+    (:func:`~vdtn_marl.sim.channel.rayleigh_power_gain_exponential`, laid out [T, W, B]): the
+    same law, other numbers, in a fraction of the time; on CUDA with torch's
+    ``exponential_`` on the device.
 
     On torch the draws land in ``workspace``'s buffer and the tables are built link-major,
     a chunk of subframes at a time (:data:`CHUNK_VALUES`), into ``out``'s storage when it has
@@ -253,6 +261,8 @@ def build_interval_tables(
     cross_ls = cross_ls * off_diagonal
     v2i_signal_ls = v2i_lin[:, v2i_user] * v2i_power_mw  # [B, M]
     width = 3 * links * subch + links * links + subch
+    if fading_draws not in FADING_DRAWS:
+        raise ValueError(f"fading_draws={fading_draws!r} must be one of {FADING_DRAWS}")
     if not numpy:
         return _build_tables_link_major(
             (own_ls, v2i_to_rx_ls, tx_to_bs_ls, cross_ls, v2i_signal_ls),
@@ -262,9 +272,13 @@ def build_interval_tables(
             generator,
             workspace or FadingWorkspace(),
             out,
+            fading_draws,
         )
 
-    fading = rayleigh_power_gain((t, b, width), generator, numpy=numpy)
+    if fading_draws == "exponential":  # [T, W, B] as on torch, seen as [T, B, W]
+        fading = rayleigh_power_gain_exponential((t, width, b), generator).transpose(0, 2, 1)
+    else:
+        fading = rayleigh_power_gain((t, b, width), generator, numpy=numpy)
     block = links * subch
     cut = (0, block, 2 * block, 3 * block, 3 * block + links * links)
     own = fading[..., cut[0] : cut[1]].reshape(t, b, links, subch) * own_ls[None, :, :, None]
@@ -320,7 +334,7 @@ def _reusable(out: IntervalTables | None, shapes: list[tuple[int, ...]], like: t
 
 
 def _build_tables_link_major(
-    large_scale, v2i_power_mw: float, t: int, width: int, generator, workspace, out
+    large_scale, v2i_power_mw: float, t: int, width: int, generator, workspace, out, fading_draws
 ) -> IntervalTables:
     """The torch path of :func:`build_interval_tables`: the same float32 operations on every
     entry as the NumPy path, written link-major a chunk of subframes at a time. The own,
@@ -343,21 +357,30 @@ def _build_tables_link_major(
         torch.empty(shape, dtype=own_ls.dtype, device=own_ls.device) for shape in shapes
     )
 
-    # the interval's draws in one call: the same numbers as rayleigh_power_gain's randn
-    normals = workspace.get("normals", (2, t, b, width), own_ls)
-    normals.normal_(generator=generator)
     chunk = _chunk_subframes(b, width, t)
     block = links * subch
+    if fading_draws == "exponential":  # |h|² ~ Exp(1) drawn link-major: [T, W, B]
+        drawn = workspace.get("exponential", (t, width, b), own_ls)
+        if drawn.device.type == "cpu":
+            rayleigh_power_gain_exponential(drawn.shape, generator, out=drawn.numpy())
+        else:
+            drawn.exponential_(generator=generator)
+    else:  # the interval's draws in one call: the same numbers as rayleigh_power_gain's randn
+        normals = workspace.get("normals", (2, t, b, width), own_ls)
+        normals.normal_(generator=generator)
     for t0 in range(0, t, chunk):
         t1 = min(t, t0 + chunk)
         c = t1 - t0
-        # |h|² = (x² + y²)/2 for the chunk, in place in the draws [C, B, W], then link-major
-        # [C, W, B] (one transposing copy: elementwise operations that transpose as they go
-        # cost torch several times more)
-        x, y = normals[0, t0:t1], normals[1, t0:t1]
-        x.mul_(x).add_(y.mul_(y)).mul_(0.5)
-        fading = workspace.get("fading", (chunk, width, b), own_ls)[:c]
-        fading.copy_(x.transpose(1, 2))
+        if fading_draws == "exponential":
+            fading = drawn[t0:t1]
+        else:
+            # |h|² = (x² + y²)/2 for the chunk, in place in the draws [C, B, W], then
+            # link-major [C, W, B] (one transposing copy: elementwise operations that
+            # transpose as they go cost torch several times more)
+            x, y = normals[0, t0:t1], normals[1, t0:t1]
+            x.mul_(x).add_(y.mul_(y)).mul_(0.5)
+            fading = workspace.get("fading", (chunk, width, b), own_ls)[:c]
+            fading.copy_(x.transpose(1, 2))
         torch.mul(fading[:, : 3 * block].view(c, 3, links, subch, b), gain_f, out=gains[t0:t1])
         gains[t0:t1, 1].mul_(v2i_power_mw)
         cut = 3 * block + links * links
@@ -488,7 +511,7 @@ def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -
         table[subframe] for table in tables.link_major()
     )
     links, subch, batch = own_gain.shape
-    act = actions.T  # [L, B]
+    act = actions.T.contiguous()  # [L, B]: one copy, read by three gathers
     pending = state.remaining_bits.T > 0
     channel = decode.subchannel.take(act)
     power = torch.where(pending, decode.power_mw.take(act), 0.0)

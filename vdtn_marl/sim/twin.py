@@ -167,6 +167,10 @@ class DigitalTwin:
             runs the per-subframe kernel and the per-interval work on them (CPU,
             single-scenario fast path, same numbers). Draws stay in torch.
         lookahead_intervals: extra leader trace beyond the episode, for VoI rollouts.
+        fading_draws: ``"normal"`` (default: two torch normal draws per fast-fading gain) or
+            ``"exponential"`` (one Exp(1) draw per gain from NumPy's ziggurat seeded by the
+            twin's generator: the same law, other numbers, the interval's draws in a fraction
+            of the time; docs/profile.md). Both backends see the same numbers either way.
     """
 
     # the state, held in the backend's arrays as ``_<name>``; torch tensors to callers
@@ -195,6 +199,7 @@ class DigitalTwin:
         radio: bool = True,
         backend: str = "torch",
         lookahead_intervals: int = 200,
+        fading_draws: str = "normal",
     ):
         self.params = (params or TwinParams()).validate()
         if (
@@ -208,6 +213,14 @@ class DigitalTwin:
         self.device = resolve_device(device)
         if backend == "numpy" and self.device.type != "cpu":
             raise ConfigError(f"backend='numpy' needs device='cpu', got device={device!r}")
+        if fading_draws not in channel.FADING_DRAWS:
+            raise ConfigError(
+                f"fading_draws={fading_draws!r} must be one of {', '.join(channel.FADING_DRAWS)}"
+            )
+        #: "normal": |h|² = (x² + y²)/2 from two torch normal draws (the reference numbers);
+        #: "exponential": one Exp(1) draw per gain, the same law in a fraction of the time
+        #: (docs/profile.md), other numbers
+        self.fading_draws = fading_draws
         if lookahead_intervals < 0:
             raise ConfigError(f"lookahead_intervals={lookahead_intervals!r} must be >= 0")
         self.batch_size = int(batch_size)
@@ -440,6 +453,7 @@ class DigitalTwin:
             self.topology,
             workspace=self._workspace,
             out=self.tables if reuse else None,
+            fading_draws=self.fading_draws,
         )
 
     def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
