@@ -86,6 +86,13 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     p.add_argument("--no-cuda", action="store_true", help="do not add cuda automatically")
     p.add_argument(
+        "--fading-draws",
+        nargs="+",
+        choices=("normal", "exponential"),
+        default=["normal"],
+        help="the batched core's fast-fading draws (DigitalTwin fading_draws), one row each",
+    )
+    p.add_argument(
         "--rows",
         nargs="+",
         choices=("env", "core"),
@@ -193,13 +200,24 @@ def bench_env(kappa1: float, seconds: float, seed: int, traces: str) -> dict:
 
 # ---------------------------------------------------------------------- (b) batched core
 def bench_core(
-    batch: int, device: str, backend: str, seconds: float, seed: int, traces: str
+    batch: int,
+    device: str,
+    backend: str,
+    seconds: float,
+    seed: int,
+    traces: str,
+    fading_draws: str = "normal",
 ) -> dict:
     from vdtn_marl.policies.cacc import CACCController
     from vdtn_marl.sim.twin import DigitalTwin
 
     twin = DigitalTwin(
-        batch_size=batch, device=device, seed=seed, backend=backend, trace_source=traces
+        batch_size=batch,
+        device=device,
+        seed=seed,
+        backend=backend,
+        trace_source=traces,
+        fading_draws=fading_draws,
     )
     dev = twin.device
     controller = CACCController(twin.params.platoon)
@@ -244,7 +262,9 @@ def bench_core(
     rate = subframes / elapsed
     name = dev.type if dev.type == "cpu" else torch.cuda.get_device_name(dev)
     return {
-        "name": f"DigitalTwin B={batch} {backend}/{dev.type}",
+        "name": f"DigitalTwin B={batch} {backend}/{dev.type}"
+        + ("" if fading_draws == "normal" else f" {fading_draws} fading"),
+        "fading_draws": fading_draws,
         "kind": "core",
         "batch_size": batch,
         "device": str(dev),
@@ -418,8 +438,11 @@ def _targets(results: list[dict]) -> list[dict]:
                     }
                 )
     core = [r for r in results if r["kind"] == "core" and r["backend"] == "torch"]
-    for device in dict.fromkeys(r["device"] for r in core):
-        rows = sorted((r for r in core if r["device"] == device), key=lambda r: r["batch_size"])
+    for device, draws in dict.fromkeys((r["device"], r["fading_draws"]) for r in core):
+        rows = sorted(
+            (r for r in core if (r["device"], r["fading_draws"]) == (device, draws)),
+            key=lambda r: r["batch_size"],
+        )
         target = TARGET_CORE_AGENT_STEPS_PER_S["cuda" if device.startswith("cuda") else "cpu"]
         at = [r for r in rows if r["batch_size"] >= TARGET_CORE_BATCH]
         if at:
@@ -438,7 +461,8 @@ def _targets(results: list[dict]) -> list[dict]:
             sizes = ", ".join(f"{r['batch_size']:,}" for r in big)
             out.append(
                 {
-                    "target": f"(b) {device}: agent-subframe steps/s no lower at a larger B "
+                    "target": f"(b) {device}, {draws} fading: agent-subframe steps/s no "
+                    "lower at a larger B "
                     f"(B = {sizes})",
                     "value": min(b / a for a, b in zip(rates, rates[1:], strict=False)),
                     "range": [rates[0], rates[-1]],
@@ -523,15 +547,16 @@ def main(argv=None) -> int:
         )
         for device in args.device:
             sizes = args.cuda_batch_sizes if device.startswith("cuda") else args.batch_sizes
-            for batch in sizes:
-                jobs.append(
-                    (
-                        f"DigitalTwin B={batch} torch/{device}",
-                        lambda b=batch, d=device: bench_core(
-                            b, d, "torch", seconds, seed, args.traces
-                        ),
+            for draws in args.fading_draws:
+                for batch in sizes:
+                    jobs.append(
+                        (
+                            f"DigitalTwin B={batch} torch/{device} {draws} fading",
+                            lambda b=batch, d=device, f=draws: bench_core(
+                                b, d, "torch", seconds, seed, args.traces, f
+                            ),
+                        )
                     )
-                )
     peer = None
     if args.peer is not None:
         peer = load_liang(args.peer[1])
