@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 import torch
 
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import channel, link
 from vdtn_marl.sim.params import ConfigError, PlatoonParams, RadioParams, TwinParams
 from vdtn_marl.sim.platoon import IntervalIntegrator, PlatoonState, spacing_errors
@@ -468,11 +469,13 @@ def test_link_major_kernel_equals_the_batched_formulation_bit_for_bit(vehicles, 
     # heavy-tailed gains and many links on few sub-channels: sums of several interferers, in
     # which any other order of addition shows in the last bits
     params = TwinParams.from_overrides(num_vehicles=vehicles, num_subchannels=subchannels)
-    twin = DigitalTwin(params, batch_size=67, seed=11)
+    batch = link.LINK_MAJOR_MIN_BATCH + 3
+    twin = DigitalTwin(params, batch_size=batch, seed=11)
+    assert link.link_major(batch)
     g = torch.Generator().manual_seed(3)
     checked = 0
     for t in range(twin.subframes_per_interval):
-        actions = torch.randint(0, params.radio.num_actions, (67, twin.num_links), generator=g)
+        actions = torch.randint(0, params.radio.num_actions, (batch, twin.num_links), generator=g)
         state = link.LinkState(*(x.clone() for x in dataclasses.astuple(twin.link_state)))
         want = _subframe_reference(twin.tables, t, actions, state, twin._decode, twin._const)
         out = twin.step_subframe(actions)
@@ -509,3 +512,37 @@ def test_exponential_fading_draws_have_the_rayleigh_law_and_reproduce_by_seed():
         )
     with pytest.raises(ConfigError, match="fading_draws"):
         DigitalTwin(batch_size=1, fading_draws="uniform")
+
+
+@pytest.mark.parametrize("fading_draws", ["normal", "exponential"])
+def test_link_major_twin_equals_the_batch_first_twin(monkeypatch, fading_draws):
+    """Above LINK_MAJOR_MIN_BATCH the torch twin holds its tables and link state link-major;
+    observations, outcomes and interval records are those of the [B, ...] code bit for bit
+    (two intervals, a partial reset between them)."""
+    batch = link.LINK_MAJOR_MIN_BATCH + 5
+
+    def run(threshold: int) -> list[torch.Tensor]:
+        monkeypatch.setattr(link, "LINK_MAJOR_MIN_BATCH", threshold)
+        twin = DigitalTwin(batch_size=batch, seed=2, fading_draws=fading_draws)
+        g = torch.Generator().manual_seed(4)
+        cacc = CACCController(twin.params.platoon)
+        seen = []
+        for k in range(3):
+            for _ in range(twin.subframes_per_interval):
+                seen.append(twin.rra_observation().clone())
+                n_act = twin.params.radio.num_actions
+                out = twin.step_subframe(torch.randint(0, n_act, (batch, 3), generator=g))
+                seen += [x.clone() for x in dataclasses.astuple(out)]
+            record = twin.finish_interval(cacc(twin.vehicle_observation(False)), perfect=False)
+            seen += [record.reward, record.cam_delay_subframes, record.v2i_rate_bps]
+            if k == 0:
+                twin.reset(mask=torch.arange(batch) % 3 == 0)
+            else:
+                twin.begin_interval()
+        return seen
+
+    reference = run(10**9)
+    linked = run(link.LINK_MAJOR_MIN_BATCH)
+    assert len(reference) == len(linked)
+    for a, b in zip(reference, linked, strict=True):
+        assert torch.equal(a, b)

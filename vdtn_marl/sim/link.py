@@ -175,6 +175,16 @@ def _link_layout(topology: Topology, num_subchannels: int, device: torch.device 
     return tx, rx, v2i_user, off_diagonal
 
 
+#: batch sizes from which the torch path works link-major (measured: below it the extra
+#: operations of the link-major kernel cost more than its streaming saves, docs/profile.md)
+LINK_MAJOR_MIN_BATCH = 256
+
+
+def link_major(batch: int, numpy: bool = False) -> bool:
+    """Whether a twin of ``batch`` scenarios holds its tables and link state link-major."""
+    return not numpy and batch >= LINK_MAJOR_MIN_BATCH
+
+
 #: values per array of a chunk of the interval's work on the torch path: a chunk of subframes
 #: is worked through while its arrays are in the core's cache (L2: 0.5–2 MiB per core)
 CHUNK_VALUES = 1 << 16
@@ -263,7 +273,7 @@ def build_interval_tables(
     width = 3 * links * subch + links * links + subch
     if fading_draws not in FADING_DRAWS:
         raise ValueError(f"fading_draws={fading_draws!r} must be one of {FADING_DRAWS}")
-    if not numpy:
+    if link_major(b, numpy):
         return _build_tables_link_major(
             (own_ls, v2i_to_rx_ls, tx_to_bs_ls, cross_ls, v2i_signal_ls),
             v2i_power_mw,
@@ -275,8 +285,10 @@ def build_interval_tables(
             fading_draws,
         )
 
-    if fading_draws == "exponential":  # [T, W, B] as on torch, seen as [T, B, W]
+    if fading_draws == "exponential":  # [T, W, B] as link-major, seen as [T, B, W]
         fading = rayleigh_power_gain_exponential((t, width, b), generator).transpose(0, 2, 1)
+        if not numpy:
+            fading = torch.from_numpy(fading).to(v2i_gain_db.device)
     else:
         fading = rayleigh_power_gain((t, b, width), generator, numpy=numpy)
     block = links * subch
@@ -406,6 +418,12 @@ def new_link_state(batch: int, links: int, subchannels: int, radio: RadioParams,
             delay_subframes=np.full((batch, links), t + 1, np.int64),
             occupancy=np.zeros((batch, subchannels), np.float32),
         )
+    if not link_major(batch):
+        return LinkState(
+            remaining_bits=torch.full((batch, links), float(radio.cam_size_bits), device=device),
+            delay_subframes=torch.full((batch, links), t + 1, dtype=torch.long, device=device),
+            occupancy=torch.zeros(batch, subchannels, device=device),
+        )
     # link-major storage, shown [B, ...]
     return LinkState(
         remaining_bits=torch.full((links, batch), float(radio.cam_size_bits), device=device).T,
@@ -471,11 +489,14 @@ def subframe_step(
     that formulation, tests/sim/test_physics.py). On NumPy arrays the V2V
     interference is NumPy's matmul, whose order is BLAS's (the single-scenario path's own
     numbers: in about 0.4 % of the subframes in which two interferers share a receiver's
-    sub-channel it differs from torch's in the last bit). On torch the work is link-major
-    (:func:`_subframe_step_link_major`); the results are ``[B, ...]`` views.
+    sub-channel it differs from torch's in the last bit). On torch from
+    :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
+    (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it this
+    function's own ``[B, L, M]`` code.
     """
-    if isinstance(actions, torch.Tensor):
+    if isinstance(actions, torch.Tensor) and link_major(actions.shape[0]):
         return _subframe_step_link_major(tables, subframe, actions, state, decode, const)
+    xp = np if isinstance(actions, np.ndarray) else torch
     pending = state.remaining_bits > 0
     channel = decode.subchannel[actions]  # [B, L]
     power = decode.power_mw[actions] * pending  # [B, L]
@@ -487,18 +508,18 @@ def subframe_step(
     own = tables.own_gain[subframe].take(flat)
     from_v2i = tables.v2i_to_rx_mw[subframe].take(flat)
     # received V2V power at each receiver on each sub-channel, then the receiver's own channel
-    rx_per_channel = np.matmul(tables.cross_gain[subframe], power_onehot)  # [B, L, M]
+    rx_per_channel = xp.matmul(tables.cross_gain[subframe], power_onehot)  # [B, L, M]
     from_v2v = rx_per_channel.take(flat)
     v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
-    v2v_bits = np.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
+    v2v_bits = xp.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
 
     bs_interference = sum_axis(power_onehot * tables.tx_to_bs_gain[subframe], 1)  # [B, M]
     v2i_sinr = tables.v2i_signal_mw[subframe] / (const.noise_mw + bs_interference)
-    v2i_rate = np.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
+    v2i_rate = xp.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
 
     state.remaining_bits = state.remaining_bits - v2v_bits
     delivered_now = pending & (state.remaining_bits <= 0)
-    state.delay_subframes = np.where(delivered_now, subframe + 1, state.delay_subframes)
+    state.delay_subframes = xp.where(delivered_now, subframe + 1, state.delay_subframes)
     state.occupancy = sum_axis(tx_onehot, 1)
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
 

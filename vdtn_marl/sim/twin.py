@@ -501,7 +501,7 @@ class DigitalTwin:
         slot[..., lay["command_history"]] = history
         obs[...] = slot
         obs[..., lay.time_left] = self._time_left[:, None, None]
-        if self.ns.numpy:
+        if not link.link_major(b, self.ns.numpy):
             obs[..., lay.csi] = link.rra_static_observation(
                 tables, self.params.radio, self._const.noise_mw
             )
