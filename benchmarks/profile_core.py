@@ -12,8 +12,9 @@ at each interval end the impaired vehicle observation, a CACC command, ``finish_
   up to;
 - torch profiler tables of the start of an interval and of the subframes: each operator's
   share of the phase's self CPU time and its calls per interval;
-- the machine's limits measured in the same run: ``Tensor.normal_`` draws/s (the fading is
-  two normal draws per gain), a large ``copy_``'s memory bandwidth, and the least time an
+- the machine's limits measured in the same run: ``Tensor.normal_`` draws/s (the reference
+  fading is two normal draws per gain), NumPy's float32 exponential draws/s (one per gain with
+  ``--fading-draws exponential``), a large ``copy_``'s memory bandwidth, and the least time an
   interval's draws and table writes can take at those rates.
 
 Prints markdown tables (``docs/profile.md`` holds a copy) and writes JSON with the command,
@@ -167,7 +168,8 @@ def profile_batch(
         "interval_ms": total_ms,
         "agent_steps_per_s": steps / (total_ms / 1000.0),
         "ops": {phase: _phase_ops(prof, phase, profiled) for phase in ("start", "subframes")},
-        "normals_per_interval": _normals_per_interval(twin),
+        "fading_draws": twin.fading_draws,
+        "draws_per_interval": _draws_per_interval(twin),
         "table_bytes_per_interval": _table_bytes(twin),
     }
 
@@ -199,10 +201,12 @@ def _phase_ops(prof, phase: str, intervals: int) -> list[dict]:
     ]
 
 
-def _normals_per_interval(twin) -> int:
+def _draws_per_interval(twin) -> int:
+    """Fast-fading draws of one interval: two normals per gain, or one exponential."""
     links, subch = twin.num_links, twin.num_subchannels
     gains = 3 * links * subch + links * links + subch
-    return 2 * twin.subframes_per_interval * twin.batch_size * gains
+    per_gain = 2 if twin.fading_draws == "normal" else 1
+    return per_gain * twin.subframes_per_interval * twin.batch_size * gains
 
 
 def _table_bytes(twin) -> int:
@@ -237,8 +241,12 @@ def machine_limits(device: str, seed: int) -> dict:
     normal_s = median_s(lambda: x.normal_(generator=gen))
     uniform_s = median_s(lambda: x.uniform_(generator=gen))
     copy_s = median_s(lambda: y.copy_(x))
+    rng = np.random.Generator(np.random.SFC64(seed))
+    z = np.empty(LIMIT_VALUES, np.float32)
+    exponential_s = median_s(lambda: rng.standard_exponential(out=z, dtype=np.float32))
     return {
         "normal_per_s": LIMIT_VALUES / normal_s,
+        "numpy_exponential_per_s": LIMIT_VALUES / exponential_s,
         "uniform_per_s": LIMIT_VALUES / uniform_s,
         "copy_bytes_per_s": 2 * 4 * LIMIT_VALUES / copy_s,
     }
@@ -254,7 +262,8 @@ def report(results: list[dict], limits: dict) -> str:
         ms = r["per_interval_ms"]
         total = r["interval_ms"]
         floor = 1000.0 * (
-            r["normals_per_interval"] / limits["normal_per_s"]
+            r["draws_per_interval"]
+            / limits["normal_per_s" if r["fading_draws"] == "normal" else "numpy_exponential_per_s"]
             + r["table_bytes_per_interval"] / limits["copy_bytes_per_s"]
         )
         lines.append(
@@ -279,7 +288,8 @@ def report(results: list[dict], limits: dict) -> str:
     lines += [
         "",
         f"Machine limits: normal_ {limits['normal_per_s'] / 1e6:,.0f} M draws/s, uniform_ "
-        f"{limits['uniform_per_s'] / 1e6:,.0f} M draws/s, copy "
+        f"{limits['uniform_per_s'] / 1e6:,.0f} M draws/s, NumPy's float32 exponential "
+        f"{limits['numpy_exponential_per_s'] / 1e6:,.0f} M draws/s, copy "
         f"{limits['copy_bytes_per_s'] / 1e9:,.1f} GB/s (read + write).",
     ]
     return "\n".join(lines)

@@ -94,3 +94,32 @@ def test_peer_rows_are_timed_in_the_same_run_and_ratios_printed(tmp_path, capsys
     # the user's path is not written into the results
     assert str(checkout) not in out.read_text()
     assert "PEER_CHECKOUT" in data["argv"]
+
+
+def _profile_module():
+    script = SCRIPT.parent / "profile_core.py"
+    spec = importlib.util.spec_from_file_location("_bench_profile_core", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.slow
+def test_profile_attributes_the_fading_draws_to_the_interval_start(tmp_path, capsys):
+    out = tmp_path / "profile.json"
+    module = _profile_module()
+    module.LIMIT_VALUES = 1 << 16  # the machine's limits on small arrays: a quick test
+    assert module.main(["--batch-sizes", "3", "--intervals", "2", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    (row,) = data["results"]
+    assert row["interval_ms"] == pytest.approx(sum(row["per_interval_ms"].values()))
+    # platoon4: W = 3LM + L² + M = 49 gains per scenario and subframe, two normals each
+    assert row["draws_per_interval"] == 2 * 50 * 3 * 49
+    start_ops = {o["op"]: o for o in row["ops"]["start"]}
+    assert "aten::normal_" in start_ops
+    assert "aten::normal_" not in {o["op"] for o in row["ops"]["subframes"]}
+    assert data["limits"]["normal_per_s"] > 0
+    assert "| 3 |" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        module.main(["--batch-sizes", "0"])
+    assert "--batch-sizes" in capsys.readouterr().err
