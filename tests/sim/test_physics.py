@@ -1,11 +1,13 @@
 """Physics of the twin against hand-computed values (docs/model.md §2, §4)."""
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 import torch
 
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import channel, link
 from vdtn_marl.sim.params import ConfigError, PlatoonParams, RadioParams, TwinParams
 from vdtn_marl.sim.platoon import IntervalIntegrator, PlatoonState, spacing_errors
@@ -435,3 +437,112 @@ def test_winner_b1_form_is_continuous_at_the_breakpoint():
     assert torch.allclose(gap, torch.full((2,), 34.6 * math.log10(3.0)), atol=1e-3)
     with pytest.raises(ConfigError, match="v2v_pathloss_form='winner' must be one of 'liang'"):
         TwinParams.from_overrides(v2v_pathloss_form="winner")
+
+
+def _subframe_reference(tables, subframe, actions, state, decode, const):
+    """The torch kernel in its [B, L, M] formulation (batched matmul, sum over the link axis):
+    the numbers the link-major kernel must reproduce bit for bit."""
+    pending = state.remaining_bits > 0
+    channel = decode.subchannel[actions]
+    power = decode.power_mw[actions] * pending
+    tx_onehot = decode.onehot[actions] * (power > 0)[..., None]
+    power_onehot = tx_onehot * power[..., None]
+    flat = const.row_offset + channel
+    own = tables.own_gain[subframe].contiguous().take(flat)
+    from_v2i = tables.v2i_to_rx_mw[subframe].contiguous().take(flat)
+    rx = torch.matmul(tables.cross_gain[subframe].contiguous(), power_onehot)
+    from_v2v = rx.take(flat)
+    v2v_bits = torch.log1p(power * own / (const.noise_mw + from_v2i + from_v2v)) * (
+        const.bandwidth_hz * const.subframe_s / math.log(2.0)
+    )
+    to_bs = (power_onehot * tables.tx_to_bs_gain[subframe].contiguous()).sum(1)
+    v2i_sinr = tables.v2i_signal_mw[subframe] / (const.noise_mw + to_bs)
+    v2i_rate = torch.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
+    return v2i_rate, v2v_bits, power
+
+
+@pytest.mark.parametrize(
+    "vehicles,subchannels",
+    [(3, 1), (4, 4), (6, 3), (8, 4), (16, 4), (20, 4), (9, 5), (8, 8), (4, 12), (21, 1)],
+)
+def test_link_major_kernel_equals_the_batched_formulation_bit_for_bit(vehicles, subchannels):
+    # heavy-tailed gains and many links on few sub-channels: sums of several interferers, in
+    # which any other order of addition shows in the last bits
+    params = TwinParams.from_overrides(num_vehicles=vehicles, num_subchannels=subchannels)
+    batch = link.LINK_MAJOR_MIN_BATCH + 3
+    twin = DigitalTwin(params, batch_size=batch, seed=11)
+    assert link.link_major(batch)
+    g = torch.Generator().manual_seed(3)
+    checked = 0
+    for t in range(twin.subframes_per_interval):
+        actions = torch.randint(0, params.radio.num_actions, (batch, twin.num_links), generator=g)
+        state = link.LinkState(*(x.clone() for x in dataclasses.astuple(twin.link_state)))
+        want = _subframe_reference(twin.tables, t, actions, state, twin._decode, twin._const)
+        out = twin.step_subframe(actions)
+        for a, b in zip(want, (out.v2i_rate_bps, out.v2v_bits, out.v2v_power_mw), strict=True):
+            assert torch.equal(a, b)
+        checked += int((out.v2v_power_mw > 0).sum())
+    assert checked > 0
+
+
+def test_exponential_fading_draws_have_the_rayleigh_law_and_reproduce_by_seed():
+    """fading_draws="exponential": |h|² ~ Exp(1) (mean 1, variance 1, P(|h|² > 2) = e⁻²),
+    the same tables on both backends and for the same seed, other numbers than "normal"."""
+    gains = {}
+    for draws in ("normal", "exponential"):
+        twin = DigitalTwin(batch_size=512, seed=5, fading_draws=draws)
+        # own gain / its large-scale factor: the fading alone, 50 × 512 × 3 × 4 draws
+        own = twin.tables.own_gain.double()
+        gains[draws] = fading = own / own.mean(dim=0, keepdim=True)
+        assert fading.mean().item() == pytest.approx(1.0, abs=0.01)
+    exponential = DigitalTwin(batch_size=512, seed=5, fading_draws="exponential").tables
+    again = DigitalTwin(batch_size=512, seed=5, fading_draws="exponential").tables
+    assert torch.equal(exponential.cross_gain, again.cross_gain)
+    assert not torch.equal(gains["normal"], gains["exponential"])
+    raw = DigitalTwin(batch_size=1, seed=9, fading_draws="exponential")
+    draws = channel.rayleigh_power_gain_exponential((400_000,), raw.generator).astype(np.float64)
+    assert draws.mean() == pytest.approx(1.0, abs=0.01)
+    assert draws.var() == pytest.approx(1.0, abs=0.02)
+    assert (draws > 2.0).mean() == pytest.approx(math.exp(-2.0), abs=0.003)
+    numpy_twin = DigitalTwin(batch_size=1, seed=6, backend="numpy", fading_draws="exponential")
+    torch_twin = DigitalTwin(batch_size=1, seed=6, backend="torch", fading_draws="exponential")
+    for field in dataclasses.fields(link.IntervalTables):
+        np.testing.assert_array_equal(
+            getattr(numpy_twin.tables, field.name), getattr(torch_twin.tables, field.name).numpy()
+        )
+    with pytest.raises(ConfigError, match="fading_draws"):
+        DigitalTwin(batch_size=1, fading_draws="uniform")
+
+
+@pytest.mark.parametrize("fading_draws", ["normal", "exponential"])
+def test_link_major_twin_equals_the_batch_first_twin(monkeypatch, fading_draws):
+    """Above LINK_MAJOR_MIN_BATCH the torch twin holds its tables and link state link-major;
+    observations, outcomes and interval records are those of the [B, ...] code bit for bit
+    (two intervals, a partial reset between them)."""
+    batch = link.LINK_MAJOR_MIN_BATCH + 5
+
+    def run(threshold: int) -> list[torch.Tensor]:
+        monkeypatch.setattr(link, "LINK_MAJOR_MIN_BATCH", threshold)
+        twin = DigitalTwin(batch_size=batch, seed=2, fading_draws=fading_draws)
+        g = torch.Generator().manual_seed(4)
+        cacc = CACCController(twin.params.platoon)
+        seen = []
+        for k in range(3):
+            for _ in range(twin.subframes_per_interval):
+                seen.append(twin.rra_observation().clone())
+                n_act = twin.params.radio.num_actions
+                out = twin.step_subframe(torch.randint(0, n_act, (batch, 3), generator=g))
+                seen += [x.clone() for x in dataclasses.astuple(out)]
+            record = twin.finish_interval(cacc(twin.vehicle_observation(False)), perfect=False)
+            seen += [record.reward, record.cam_delay_subframes, record.v2i_rate_bps]
+            if k == 0:
+                twin.reset(mask=torch.arange(batch) % 3 == 0)
+            else:
+                twin.begin_interval()
+        return seen
+
+    reference = run(10**9)
+    linked = run(link.LINK_MAJOR_MIN_BATCH)
+    assert len(reference) == len(linked)
+    for a, b in zip(reference, linked, strict=True):
+        assert torch.equal(a, b)

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 
+from vdtn_marl.sim import link
 from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import PlatoonState
@@ -111,3 +112,38 @@ def test_a_snapshot_under_the_public_names_resumes(backend):
     saved = {key.removeprefix("_") if key[1:] in STATE else key: v for key, v in saved.items()}
     assert set(STATE) <= set(saved)
     _resumes(twin, saved)
+
+
+@pytest.mark.parametrize("fading_draws", ["normal", "exponential"])
+def test_a_link_major_twin_resumes_mid_interval_bit_for_bit(fading_draws):
+    """From LINK_MAJOR_MIN_BATCH on the torch twin's tables, link state and observation buffer
+    are link-major views of reused buffers: a snapshot taken mid-interval, restored into a
+    twin built alike, continues as the original does (the restored tables are plain tensors)."""
+    batch = link.LINK_MAJOR_MIN_BATCH + 1
+
+    def subframes(twin: DigitalTwin, count: int, gen: torch.Generator) -> list[np.ndarray]:
+        out = []
+        for _ in range(count):
+            actions = torch.randint(
+                0, twin.params.radio.num_actions, (batch, twin.num_links), generator=gen
+            )
+            outcome = twin.step_subframe(actions)
+            out += [_copy(twin.rra_observation()), _copy(outcome.v2v_bits)]
+        if twin.subframe == twin.subframes_per_interval:  # close the interval, run one more
+            commands = CACCController(twin.params.platoon)(twin.vehicle_observation(False))
+            out.append(_copy(twin.finish_interval(commands, perfect=False).reward))
+            twin.begin_interval()
+            out += _run(twin, 1)
+        return out
+
+    twin = DigitalTwin(PARAMS, batch_size=batch, seed=1, fading_draws=fading_draws)
+    _run(twin, 1)
+    subframes(twin, 20, torch.Generator().manual_seed(5))
+    saved = copy.deepcopy(export_state(twin))
+    rest = twin.subframes_per_interval - 20
+    expected = subframes(twin, rest, torch.Generator().manual_seed(6))
+    other = DigitalTwin(PARAMS, batch_size=batch, seed=99, fading_draws=fading_draws)
+    import_state(other, saved)
+    got = subframes(other, rest, torch.Generator().manual_seed(6))
+    for a, b in zip(got, expected, strict=True):
+        np.testing.assert_array_equal(a, b)

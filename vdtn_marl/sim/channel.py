@@ -146,6 +146,26 @@ def rayleigh_power_gain(
     return 0.5 * (xy[0] * xy[0] + xy[1] * xy[1])
 
 
+#: how a twin draws its Rayleigh fast fading (:func:`draw_fading`)
+FADING_DRAWS = ("normal", "exponential")
+
+
+def rayleigh_power_gain_exponential(
+    shape: tuple[int, ...], generator: torch.Generator, out: np.ndarray | None = None
+) -> np.ndarray:
+    """Rayleigh fast-fading power gains |h|² ~ Exp(1) (the law of (x² + y²)/2 with x, y ~
+    N(0, 1)), one draw per gain: float32 from NumPy's ziggurat on an SFC64 generator seeded by
+    one 63-bit draw from ``generator``, so that the twin's torch generator
+    stays the only random state. About four times fewer generator cycles than
+    :func:`rayleigh_power_gain` (half the draws, each faster); other numbers than it."""
+    seed = int(torch.randint(0, 2**63 - 1, (), generator=generator, device=generator.device))
+    rng = np.random.Generator(np.random.SFC64(seed))
+    if out is None:
+        out = np.empty(shape, np.float32)
+    rng.standard_exponential(out=out, dtype=np.float32)
+    return out
+
+
 def db_to_linear(db: torch.Tensor | np.ndarray | float) -> torch.Tensor | np.ndarray | float:
     if isinstance(db, torch.Tensor | np.ndarray):
         return exp10(db / 10.0)

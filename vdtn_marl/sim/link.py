@@ -5,10 +5,17 @@ draws the fast fading of all T subframes at once and folds powers, antenna gains
 figures into linear tables ``[T, B, ...]``. The per-subframe kernel :func:`subframe_step` then
 only gathers and does a few arithmetic operations.
 
-The kernel is written against the array namespace of its inputs: the same code runs on torch
-tensors (batched, CPU or CUDA) and on NumPy views of the same tables (the single-scenario
-PettingZoo fast path, where eager torch's per-operation overhead would dominate). All random
-draws happen in torch, so both paths see identical numbers.
+Two layouts of the same numbers. The torch path (batched, CPU or CUDA) stores every table
+*link-major*, with the batch innermost (``[T, L, M, B]``, ``[T, L, L, B]``, ``[T, M, B]``; the
+link state ``[L, B]``), so that each of the kernel's operations streams over B contiguous
+values; :class:`IntervalTables` and :class:`LinkState` show them in the documented
+``[T, B, ...]`` / ``[B, ...]`` shapes as views. Its buffers (the draws, the tables) are reused
+from interval to interval (:class:`FadingWorkspace`), because a fresh multi-megabyte tensor
+costs a page fault per 4 KiB on the CPU. The NumPy path (the single-scenario PettingZoo fast
+path, where eager torch's per-operation overhead would dominate) keeps the plain
+``[T, B, ...]`` arrays. Both perform the same float32 operations on every entry, in the same
+order; all random draws happen in torch, so both paths see identical numbers (up to NumPy's
+own matmul, see :func:`subframe_step`).
 """
 
 from __future__ import annotations
@@ -22,16 +29,14 @@ import torch
 
 from vdtn_marl.sim.backend import Array, cat, clamp, log10, sum_axis
 from vdtn_marl.sim.channel import (
+    FADING_DRAWS,
     db_to_linear,
     rayleigh_power_gain,
+    rayleigh_power_gain_exponential,
 )
 from vdtn_marl.sim.layout import RRA_OBS_GAIN_CLIP, RRA_OBS_GAIN_SCALE_DB
 from vdtn_marl.sim.params import RadioParams
 from vdtn_marl.sim.topology import Topology
-
-
-def _xp(x: Array):
-    return np if isinstance(x, np.ndarray) else torch
 
 
 @dataclass(frozen=True)
@@ -64,7 +69,8 @@ class IntervalTables:
     """Linear radio quantities for every subframe of one control interval.
 
     Gains include antenna gains and the receiver's noise figure, so every SINR uses the same
-    thermal noise power. Shapes: T subframes, B scenarios, L V2V links, M sub-channels.
+    thermal noise power. Shapes: T subframes, B scenarios, L V2V links, M sub-channels. On the
+    torch path the fields are views of link-major storage (:meth:`link_major`).
     """
 
     own_gain: Array  # [T, B, L, M] V2V link l: its transmitter → its receiver, per sub-channel
@@ -76,10 +82,28 @@ class IntervalTables:
     def numpy(self) -> IntervalTables:
         return IntervalTables(*(getattr(self, f.name).cpu().numpy() for f in fields(self)))
 
+    def link_major(self) -> tuple[Array, ...]:
+        """The fields with the batch axis moved last: ``[T, L, M, B]`` (three of them),
+        ``[T, L_rx, L_tx, B]`` and ``[T, M, B]`` (views; contiguous for tables built by
+        :func:`build_interval_tables` on torch)."""
+        return tuple(_batch_last(getattr(self, f.name), 1) for f in fields(self))
+
+
+def _batch_last(x: Array, axis: int) -> Array:
+    """A view of ``x`` with axis ``axis`` moved to the end."""
+    return x.movedim(axis, -1) if isinstance(x, torch.Tensor) else np.moveaxis(x, axis, -1)
+
+
+def _batch_first(x: Array) -> Array:
+    """A view of a batch-last ``x`` with its last axis moved to the front (the inverse for
+    ``[L, B]``-like arrays)."""
+    return x.movedim(-1, 0) if isinstance(x, torch.Tensor) else np.moveaxis(x, -1, 0)
+
 
 @dataclass
 class LinkState:
-    """CAM progress of each V2V link in the current interval (arrays of the kernel's backend)."""
+    """CAM progress of each V2V link in the current interval (arrays of the kernel's backend;
+    on torch, views of link-major ``[L, B]`` / ``[M, B]`` storage)."""
 
     remaining_bits: Array  # [B, L] float32, ≤ 0 once delivered
     delay_subframes: (
@@ -151,6 +175,54 @@ def _link_layout(topology: Topology, num_subchannels: int, device: torch.device 
     return tx, rx, v2i_user, off_diagonal
 
 
+#: batch sizes from which the torch path works link-major (measured: below it the extra
+#: operations of the link-major kernel cost more than its streaming saves, docs/profile.md)
+LINK_MAJOR_MIN_BATCH = 256
+
+
+def link_major(batch: int, numpy: bool = False) -> bool:
+    """Whether a twin of ``batch`` scenarios holds its tables and link state link-major."""
+    return not numpy and batch >= LINK_MAJOR_MIN_BATCH
+
+
+#: values per array of a chunk of the interval's work on the torch path: a chunk of subframes
+#: is worked through while its arrays are in the core's cache (L2: 0.5–2 MiB per core)
+CHUNK_VALUES = 1 << 16
+
+
+class FadingWorkspace:
+    """Buffers the torch path reuses from interval to interval: the interval's normal draws
+    and the scratch of a chunk. Never state (each interval overwrites them): it has no
+    ``__dict__``, so snapshots (:mod:`vdtn_marl.sim.snapshot`) skip it, and a deep copy of a
+    twin copies it."""
+
+    __slots__ = ("_buffers",)
+
+    def __init__(self):
+        self._buffers: dict[str, torch.Tensor] = {}
+
+    def get(self, name: str, shape: tuple[int, ...], like: torch.Tensor) -> torch.Tensor:
+        """The buffer ``name`` of ``shape`` in ``like``'s dtype and device (kept, or new)."""
+        buffer = self._buffers.get(name)
+        if (
+            buffer is None
+            or tuple(buffer.shape) != tuple(shape)
+            or buffer.dtype != like.dtype
+            or buffer.device != like.device
+        ):
+            buffer = self._buffers[name] = torch.empty(shape, dtype=like.dtype, device=like.device)
+        return buffer
+
+    def __deepcopy__(self, memo) -> FadingWorkspace:
+        return FadingWorkspace()  # scratch: nothing to copy
+
+
+def _chunk_subframes(batch: int, width: int, subframes: int) -> int:
+    """Subframes per chunk: ``width`` values per scenario and subframe, ≈ CHUNK_VALUES per
+    array, at least one subframe and at most all of them."""
+    return max(1, min(subframes, CHUNK_VALUES // max(1, batch * width)))
+
+
 def build_interval_tables(
     v2v_gain_db: torch.Tensor,
     v2i_gain_db: torch.Tensor,
@@ -158,6 +230,9 @@ def build_interval_tables(
     num_subframes: int,
     generator: torch.Generator,
     topology: Topology,
+    workspace: FadingWorkspace | None = None,
+    out: IntervalTables | None = None,
+    fading_draws: str = "normal",
 ) -> IntervalTables:
     """Draw the interval's Rayleigh fading and assemble the linear tables.
 
@@ -165,9 +240,20 @@ def build_interval_tables(
     :func:`large_scale_gains_db`. V2V link l runs from ``topology.link_tx[l]`` to
     ``topology.link_rx[l]``; sub-channel m carries the uplink of ``topology.v2i_user(M)[m]``
     (PF: link l from vehicle l to l+1, V2I user m = vehicle m mod N). Fading draws happen in a
-    fixed order so that a seeded generator reproduces the same tables. With NumPy gains (the
-    single-scenario fast path) the fading is drawn with the same torch generator and the
-    tables are NumPy arrays.
+    fixed order, one call for the whole interval (:func:`rayleigh_power_gain`: [2, T, B, W]
+    normals, W = 3LM + L² + M gains per scenario and subframe), so that a seeded generator
+    reproduces the same tables. With NumPy gains (the single-scenario fast path) the fading is
+    drawn with the same torch generator and the tables are NumPy arrays.
+
+    ``fading_draws="exponential"`` draws each gain as one Exp(1) number
+    (:func:`~vdtn_marl.sim.channel.rayleigh_power_gain_exponential`, laid out [T, W, B]): the
+    same law, other numbers, in a fraction of the time; on CUDA with torch's
+    ``exponential_`` on the device.
+
+    On torch the draws land in ``workspace``'s buffer and the tables are built link-major,
+    a chunk of subframes at a time (:data:`CHUNK_VALUES`), into ``out``'s storage when it has
+    the right shapes and is link-major (the previous interval's tables, overwritten), else
+    into new tensors.
     """
     b, n = v2i_gain_db.shape
     links, subch, t = topology.num_links, radio.num_subchannels, num_subframes
@@ -184,10 +270,27 @@ def build_interval_tables(
     cross_ls = v2v_lin[:, tx][:, :, rx].swapaxes(1, 2)  # [B, L_rx, L_tx]
     cross_ls = cross_ls * off_diagonal
     v2i_signal_ls = v2i_lin[:, v2i_user] * v2i_power_mw  # [B, M]
+    width = 3 * links * subch + links * links + subch
+    if fading_draws not in FADING_DRAWS:
+        raise ValueError(f"fading_draws={fading_draws!r} must be one of {FADING_DRAWS}")
+    if link_major(b, numpy):
+        return _build_tables_link_major(
+            (own_ls, v2i_to_rx_ls, tx_to_bs_ls, cross_ls, v2i_signal_ls),
+            v2i_power_mw,
+            t,
+            width,
+            generator,
+            workspace or FadingWorkspace(),
+            out,
+            fading_draws,
+        )
 
-    fading = rayleigh_power_gain(
-        (t, b, 3 * links * subch + links * links + subch), generator, numpy=numpy
-    )
+    if fading_draws == "exponential":  # [T, W, B] as link-major, seen as [T, B, W]
+        fading = rayleigh_power_gain_exponential((t, width, b), generator).transpose(0, 2, 1)
+        if not numpy:
+            fading = torch.from_numpy(fading).to(v2i_gain_db.device)
+    else:
+        fading = rayleigh_power_gain((t, b, width), generator, numpy=numpy)
     block = links * subch
     cut = (0, block, 2 * block, 3 * block, 3 * block + links * links)
     own = fading[..., cut[0] : cut[1]].reshape(t, b, links, subch) * own_ls[None, :, :, None]
@@ -198,6 +301,110 @@ def build_interval_tables(
     cross = fading[..., cut[3] : cut[4]].reshape(t, b, links, links) * cross_ls[None]
     v2i_signal = fading[..., cut[4] :] * v2i_signal_ls[None]
     return IntervalTables(own, v2i_rx, to_bs, cross, v2i_signal)
+
+
+def _gain_stack(tables: IntervalTables) -> torch.Tensor | None:
+    """The link-major storage [T, 3, L, M, B] that ``own_gain``, ``v2i_to_rx_mw`` and
+    ``tx_to_bs_gain`` are views of, in this order (tables built by
+    :func:`build_interval_tables` on torch); None when they are not (e.g. after a snapshot
+    restored them as separate tensors)."""
+    own, v2i_rx, to_bs, _, _ = tables.link_major()
+    if not all(isinstance(x, torch.Tensor) for x in (own, v2i_rx, to_bs)):
+        return None
+    t, links, subch, batch = own.shape
+    block = links * subch * batch
+    strides = (3 * block, subch * batch, batch, 1)
+    base = own.data_ptr()
+    for i, array in enumerate((own, v2i_rx, to_bs)):
+        if (
+            tuple(array.shape) != (t, links, subch, batch)
+            or array.stride() != strides
+            or array.untyped_storage().data_ptr() != own.untyped_storage().data_ptr()
+            or array.data_ptr() != base + i * block * own.element_size()
+        ):
+            return None
+    return own.as_strided((t, 3, links, subch, batch), (3 * block, block, subch * batch, batch, 1))
+
+
+def _reusable(out: IntervalTables | None, shapes: list[tuple[int, ...]], like: torch.Tensor):
+    """``out``'s link-major storage (the gain stack, cross gains, V2I signals) when it has
+    these shapes, is contiguous, and in ``like``'s dtype and device; else None."""
+    if out is None:
+        return None
+    _, _, _, cross, v2i_signal = out.link_major()
+    arrays = (_gain_stack(out), cross, v2i_signal)
+    for array, shape in zip(arrays, shapes, strict=True):
+        if (
+            not isinstance(array, torch.Tensor)
+            or tuple(array.shape) != shape
+            or not array.is_contiguous()
+            or array.dtype != like.dtype
+            or array.device != like.device
+        ):
+            return None
+    return arrays
+
+
+def _build_tables_link_major(
+    large_scale, v2i_power_mw: float, t: int, width: int, generator, workspace, out, fading_draws
+) -> IntervalTables:
+    """The torch path of :func:`build_interval_tables`: the same float32 operations on every
+    entry as the NumPy path, written link-major a chunk of subframes at a time. The own,
+    V2I→rx and tx→BS gains share one storage [T, 3, L, M, B] (one multiplication builds the
+    three, one more starts their CSI features)."""
+    own_ls, v2i_to_rx_ls, tx_to_bs_ls, cross_ls, v2i_signal_ls = large_scale
+    b, links, subch = v2i_to_rx_ls.shape
+    # the large-scale factors with the batch last, broadcasting against [C, ·, ·, B]
+    gain_f = torch.stack(
+        [
+            own_ls.T[:, None, :].expand(links, subch, b),
+            v2i_to_rx_ls.permute(1, 2, 0),
+            tx_to_bs_ls.T[:, None, :].expand(links, subch, b),
+        ]
+    )  # [3, L, M, B]
+    cross_f = cross_ls.permute(1, 2, 0).contiguous()  # [L_rx, L_tx, B]
+    v2i_signal_f = v2i_signal_ls.T.contiguous()  # [M, B]
+    shapes = [(t, 3, links, subch, b), (t, links, links, b), (t, subch, b)]
+    gains, cross, v2i_signal = _reusable(out, shapes, own_ls) or tuple(
+        torch.empty(shape, dtype=own_ls.dtype, device=own_ls.device) for shape in shapes
+    )
+
+    chunk = _chunk_subframes(b, width, t)
+    block = links * subch
+    if fading_draws == "exponential":  # |h|² ~ Exp(1) drawn link-major: [T, W, B]
+        drawn = workspace.get("exponential", (t, width, b), own_ls)
+        if drawn.device.type == "cpu":
+            rayleigh_power_gain_exponential(drawn.shape, generator, out=drawn.numpy())
+        else:
+            drawn.exponential_(generator=generator)
+    else:  # the interval's draws in one call: the same numbers as rayleigh_power_gain's randn
+        normals = workspace.get("normals", (2, t, b, width), own_ls)
+        normals.normal_(generator=generator)
+    for t0 in range(0, t, chunk):
+        t1 = min(t, t0 + chunk)
+        c = t1 - t0
+        if fading_draws == "exponential":
+            fading = drawn[t0:t1]
+        else:
+            # |h|² = (x² + y²)/2 for the chunk, in place in the draws [C, B, W], then
+            # link-major [C, W, B] (one transposing copy: elementwise operations that
+            # transpose as they go cost torch several times more)
+            x, y = normals[0, t0:t1], normals[1, t0:t1]
+            x.mul_(x).add_(y.mul_(y)).mul_(0.5)
+            fading = workspace.get("fading", (chunk, width, b), own_ls)[:c]
+            fading.copy_(x.transpose(1, 2))
+        torch.mul(fading[:, : 3 * block].view(c, 3, links, subch, b), gain_f, out=gains[t0:t1])
+        gains[t0:t1, 1].mul_(v2i_power_mw)
+        cut = 3 * block + links * links
+        torch.mul(fading[:, 3 * block : cut].view(c, links, links, b), cross_f, out=cross[t0:t1])
+        torch.mul(fading[:, cut:], v2i_signal_f, out=v2i_signal[t0:t1])
+    return IntervalTables(
+        gains[:, 0].permute(0, 3, 1, 2),
+        gains[:, 1].permute(0, 3, 1, 2),
+        gains[:, 2].permute(0, 3, 1, 2),
+        cross.permute(0, 3, 1, 2),
+        v2i_signal.permute(0, 2, 1),
+    )
 
 
 def new_link_state(batch: int, links: int, subchannels: int, radio: RadioParams, t: int, device):
@@ -211,10 +418,17 @@ def new_link_state(batch: int, links: int, subchannels: int, radio: RadioParams,
             delay_subframes=np.full((batch, links), t + 1, np.int64),
             occupancy=np.zeros((batch, subchannels), np.float32),
         )
+    if not link_major(batch):
+        return LinkState(
+            remaining_bits=torch.full((batch, links), float(radio.cam_size_bits), device=device),
+            delay_subframes=torch.full((batch, links), t + 1, dtype=torch.long, device=device),
+            occupancy=torch.zeros(batch, subchannels, device=device),
+        )
+    # link-major storage, shown [B, ...]
     return LinkState(
-        remaining_bits=torch.full((batch, links), float(radio.cam_size_bits), device=device),
-        delay_subframes=torch.full((batch, links), t + 1, dtype=torch.long, device=device),
-        occupancy=torch.zeros(batch, subchannels, device=device),
+        remaining_bits=torch.full((links, batch), float(radio.cam_size_bits), device=device).T,
+        delay_subframes=torch.full((links, batch), t + 1, dtype=torch.long, device=device).T,
+        occupancy=torch.zeros(subchannels, batch, device=device).T,
     )
 
 
@@ -226,19 +440,32 @@ class KernelConstants:
     bandwidth_hz: float
     subframe_s: float
     row_offset: Array  # [B, L] int64: flat index of (b, l, 0) in a contiguous [B, L, M] array
+    link_offset: Array  # [L, B] int64: flat index of (l, 0, b) in a contiguous [L, M, B] array
+    channel_offset: Array  # [A] int64: each action's sub-channel × B
+    subchannels: Array  # [M, 1] int64: 0..M−1
 
     @classmethod
     def build(cls, radio: RadioParams, subframe_s: float, batch: int, links: int, device):
         rows = torch.arange(batch * links, device=device).reshape(batch, links)
+        per_link = torch.arange(links, device=device)[:, None] * (radio.num_subchannels * batch)
+        actions = torch.arange(radio.num_actions, device=device)
         return cls(
             noise_mw=float(db_to_linear(radio.noise_power_dbm)),
             bandwidth_hz=radio.subchannel_bandwidth_hz,
             subframe_s=subframe_s,
             row_offset=rows * radio.num_subchannels,
+            link_offset=per_link + torch.arange(batch, device=device),
+            channel_offset=actions // radio.num_power_levels * batch,
+            subchannels=torch.arange(radio.num_subchannels, device=device)[:, None],
         )
 
     def numpy(self) -> KernelConstants:
-        return replace(self, row_offset=self.row_offset.cpu().numpy())
+        arrays = {
+            f.name: getattr(self, f.name).cpu().numpy()
+            for f in fields(self)
+            if isinstance(getattr(self, f.name), torch.Tensor)
+        }
+        return replace(self, **arrays)
 
 
 def subframe_step(
@@ -254,8 +481,22 @@ def subframe_step(
     ``actions`` [B, L] are integer RRA actions. A link whose CAM is already delivered is silent.
     SINR_V2I[m] = P_I·G_m→BS / (σ² + Σ_{j on m} P_j·G_j→BS);
     SINR_V2V[i] = P_i·G_i / (σ² + P_I·G_{m→i} + Σ_{j≠i on m} P_j·G_{j→i}); rate = W·log2(1+SINR).
+
+    On torch the sums over links add in the order of the ``[B, L, M]`` formulation's batched
+    matmul and sum over the link axis: in link order, 0 + x_0 + x_1 + …, each term rounded to
+    float32 before it is added, where that is their order (:func:`_torch_adds_in_link_order`:
+    the case study's shapes), else by calling them on ``[B, ...]`` copies (tested against
+    that formulation, tests/sim/test_physics.py). On NumPy arrays the V2V
+    interference is NumPy's matmul, whose order is BLAS's (the single-scenario path's own
+    numbers: in about 0.4 % of the subframes in which two interferers share a receiver's
+    sub-channel it differs from torch's in the last bit). On torch from
+    :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
+    (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it this
+    function's own ``[B, L, M]`` code.
     """
-    xp = _xp(actions)
+    if isinstance(actions, torch.Tensor) and link_major(actions.shape[0]):
+        return _subframe_step_link_major(tables, subframe, actions, state, decode, const)
+    xp = np if isinstance(actions, np.ndarray) else torch
     pending = state.remaining_bits > 0
     channel = decode.subchannel[actions]  # [B, L]
     power = decode.power_mw[actions] * pending  # [B, L]
@@ -283,6 +524,82 @@ def subframe_step(
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
 
 
+def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -> SubframeOutcome:
+    """:func:`subframe_step` on torch tensors, link-major: every array is ``[L, B]``,
+    ``[L, M, B]``, ``[L, L, B]`` or ``[M, B]``, so that each operation streams over the batch
+    (broadcasts over a trailing axis of 3 or 4 entries cost torch several times more)."""
+    own_gain, v2i_to_rx, tx_to_bs, cross_gain, v2i_signal = (
+        table[subframe] for table in tables.link_major()
+    )
+    links, subch, batch = own_gain.shape
+    act = actions.T.contiguous()  # [L, B]: one copy, read by three gathers
+    pending = state.remaining_bits.T > 0
+    channel = decode.subchannel.take(act)
+    power = torch.where(pending, decode.power_mw.take(act), 0.0)
+
+    # entry [l, channel[l, b], b] of a contiguous [L, M, B] array, as one flat gather
+    flat = const.link_offset + const.channel_offset.take(act)
+    own = own_gain.take(flat)
+    from_v2i = v2i_to_rx.take(flat)
+    # interference at receiver i from every transmitter j on i's sub-channel
+    on_channel = channel[:, None, :] == const.subchannels  # [L, M, B]
+    in_link_order = _torch_adds_in_link_order(links, subch, own_gain.device)
+    if in_link_order:
+        same = channel[:, None, :] == channel[None, :, :]  # [L_rx, L_tx, B]
+        terms = cross_gain * torch.where(same, power[None, :, :], 0.0)
+        from_v2v = terms[:, 0]
+        for j in range(1, links):
+            from_v2v = from_v2v + terms[:, j]
+    else:  # the [B, L, M] path's matmul itself, on [B, ...] copies
+        power_onehot = torch.where(on_channel, power[:, None, :], 0.0).permute(2, 0, 1)
+        rx_per_channel = torch.matmul(
+            cross_gain.permute(2, 0, 1).contiguous(), power_onehot.contiguous()
+        )  # [B, L_rx, M]
+        from_v2v = rx_per_channel.permute(1, 2, 0).take(flat)
+    v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
+    v2v_bits = torch.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
+
+    # each link's power at the BS on its sub-channel, summed per sub-channel in link order
+    to_bs = torch.where(on_channel, (power * tx_to_bs.take(flat))[:, None, :], 0.0)
+    bs_interference = _sum_links_link_major(to_bs, in_link_order)  # [M, B]
+    v2i_sinr = v2i_signal / (const.noise_mw + bs_interference)
+    v2i_rate = torch.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
+
+    remaining = state.remaining_bits.T - v2v_bits
+    delivered_now = pending & (remaining <= 0)
+    delay = torch.where(delivered_now, subframe + 1, state.delay_subframes.T)
+    occupancy = (on_channel & (power > 0)[:, None, :]).sum(0, dtype=torch.float32)
+    state.remaining_bits, state.delay_subframes, state.occupancy = (
+        remaining.T,
+        delay.T,
+        occupancy.T,
+    )
+    return SubframeOutcome(v2i_rate.T, v2v_bits.T, power.T, delivered_now.T, pending.T)
+
+
+def _torch_adds_in_link_order(links: int, subchannels: int, device: torch.device) -> bool:
+    """Whether torch's CPU batched matmul ``[B, L, L] @ [B, L, M]`` and its sum of a
+    ``[B, L, M]`` array over the links both add in link order, 0 + x_0 + x_1 + …, each term
+    rounded to float32 first (torch 2.13, measured for L ≤ 63, M ≤ 12; pinned by
+    tests/sim/test_physics.py): for L < 5 with M ≤ 4, and for M = 4 (the case study's
+    sub-channels) with L < 18. Elsewhere, and on CUDA, they block the sums otherwise."""
+    if device.type != "cpu" or not 1 <= subchannels <= 4:
+        return False
+    return links < 5 or (subchannels == 4 and links < 18)
+
+
+def _sum_links_link_major(terms: torch.Tensor, in_link_order: bool) -> torch.Tensor:
+    """``terms`` [L, M, B] summed over the links, [M, B], with the rounding of the [B, L, M]
+    formulation's ``sum(1)``: link by link where that is its order, else that very call on a
+    [B, L, M] copy."""
+    if not in_link_order:
+        return terms.permute(2, 0, 1).contiguous().sum(1).T
+    total = terms[0]
+    for j in range(1, terms.shape[0]):
+        total = total + terms[j]
+    return total
+
+
 def gain_feature(ratio: Array) -> Array:
     """A power ratio in dB, in units of ``RRA_OBS_GAIN_SCALE_DB``, clipped (observation scale)."""
     db = 10.0 * log10(clamp(ratio, 1e-30))
@@ -296,7 +613,7 @@ def rra_static_observation(tables: IntervalTables, radio: RadioParams, noise_mw:
     maximum power; interference-to-noise it suffers from each V2I user. All in units of 10 dB.
     Torch tables give a tensor, NumPy tables an array.
     """
-    snr_at_max_power = float(db_to_linear(max(radio.v2v_power_levels_dbm))) / noise_mw
+    snr_at_max_power = _snr_at_max_power(radio, noise_mw)
     ratios = cat(
         [
             tables.own_gain * snr_at_max_power,
@@ -306,3 +623,44 @@ def rra_static_observation(tables: IntervalTables, radio: RadioParams, noise_mw:
         axis=-1,
     )
     return gain_feature(ratios)
+
+
+def _snr_at_max_power(radio: RadioParams, noise_mw: float) -> float:
+    return float(db_to_linear(max(radio.v2v_power_levels_dbm))) / noise_mw
+
+
+def fill_rra_static_observation(
+    tables: IntervalTables,
+    radio: RadioParams,
+    noise_mw: float,
+    out: torch.Tensor,
+    workspace: FadingWorkspace,
+) -> None:
+    """:func:`rra_static_observation` of torch tables written into ``out`` [T, B, L, 3M] (the
+    CSI block of the observation buffer), a chunk of subframes at a time: the same float32
+    operations on every entry, computed link-major in ``workspace``'s scratch. The clamp of
+    :func:`gain_feature` at 1e-30 is left out: it changes only ratios below 1e-5, which end at
+    the lower clip either way (the ratios are never negative)."""
+    own_gain, v2i_to_rx, tx_to_bs, _, _ = tables.link_major()
+    t, links, subch, batch = own_gain.shape
+    snr_at_max_power = _snr_at_max_power(radio, noise_mw)
+    stack = _gain_stack(tables)
+    # the stack's order (own, V2I→rx, tx→BS): each block's factor, and its block in `out`
+    factor = torch.tensor(
+        [snr_at_max_power, 1.0 / noise_mw, snr_at_max_power], dtype=own_gain.dtype
+    ).to(own_gain.device)[:, None, None, None]
+    position = (0, 2, 1)
+    chunk = _chunk_subframes(batch, 3 * links * subch, t)
+    for t0 in range(0, t, chunk):
+        t1 = min(t, t0 + chunk)
+        c = t1 - t0
+        ratios = workspace.get("csi", (chunk, 3, links, subch, batch), own_gain)[:c]
+        if stack is not None:
+            torch.mul(stack[t0:t1], factor, out=ratios)
+        else:
+            for i, gain in enumerate((own_gain, v2i_to_rx, tx_to_bs)):
+                torch.mul(gain[t0:t1], factor[i], out=ratios[:, i])
+        ratios.log10_().mul_(10.0).div_(RRA_OBS_GAIN_SCALE_DB).clamp_(*RRA_OBS_GAIN_CLIP)
+        blocks = out[t0:t1].view(c, batch, links, 3, subch)
+        for i, j in enumerate(position):
+            blocks[:, :, :, j].copy_(ratios[:, i].permute(0, 3, 1, 2))

@@ -167,6 +167,10 @@ class DigitalTwin:
             runs the per-subframe kernel and the per-interval work on them (CPU,
             single-scenario fast path, same numbers). Draws stay in torch.
         lookahead_intervals: extra leader trace beyond the episode, for VoI rollouts.
+        fading_draws: ``"normal"`` (default: two torch normal draws per fast-fading gain) or
+            ``"exponential"`` (one Exp(1) draw per gain from NumPy's ziggurat seeded by the
+            twin's generator: the same law, other numbers, the interval's draws in a fraction
+            of the time; docs/profile.md). Both backends see the same numbers either way.
     """
 
     # the state, held in the backend's arrays as ``_<name>``; torch tensors to callers
@@ -195,6 +199,7 @@ class DigitalTwin:
         radio: bool = True,
         backend: str = "torch",
         lookahead_intervals: int = 200,
+        fading_draws: str = "normal",
     ):
         self.params = (params or TwinParams()).validate()
         if (
@@ -208,6 +213,14 @@ class DigitalTwin:
         self.device = resolve_device(device)
         if backend == "numpy" and self.device.type != "cpu":
             raise ConfigError(f"backend='numpy' needs device='cpu', got device={device!r}")
+        if fading_draws not in channel.FADING_DRAWS:
+            raise ConfigError(
+                f"fading_draws={fading_draws!r} must be one of {', '.join(channel.FADING_DRAWS)}"
+            )
+        #: "normal": |h|² = (x² + y²)/2 from two torch normal draws (the reference numbers);
+        #: "exponential": one Exp(1) draw per gain, the same law in a fraction of the time
+        #: (docs/profile.md), other numbers
+        self.fading_draws = fading_draws
         if lookahead_intervals < 0:
             raise ConfigError(f"lookahead_intervals={lookahead_intervals!r} must be >= 0")
         self.batch_size = int(batch_size)
@@ -242,6 +255,9 @@ class DigitalTwin:
             offsets = torch.tensor(topology.lateral_offset_m, device=self.device)
             self._lateral_offset_m = ns.from_torch(offsets)
         self._decode = ns.from_torch(link.ActionTables.build(rp, self.device))
+        #: the torch path's draws and scratch, reused every interval (not state)
+        self._workspace = link.FadingWorkspace()
+        self.tables: link.IntervalTables | None = None
         self._const = ns.from_torch(
             link.KernelConstants.build(
                 rp, pp.subframe_s, self.batch_size, self.num_links, self.device
@@ -361,11 +377,13 @@ class DigitalTwin:
         if not self.radio_enabled:
             return
         b, rp, t = self.batch_size, self.params.radio, self.subframes_per_interval
-        tables = self._draw_interval_tables()
+        # all scenarios start over: the torch path overwrites the last interval's buffers
+        reuse = keep is None and not ns.numpy
+        tables = self._draw_interval_tables(reuse)
         link_state = link.new_link_state(
             b, self.num_links, self.num_subchannels, rp, t, ns.array_device
         )
-        obs = self._rra_observation_buffer(tables)
+        obs = self._rra_observation_buffer(tables, reuse)
         v2i_sum = ns.zeros((b, self.num_subchannels))
         if keep is not None:  # the others keep their interval: tables, CAM progress, ...
 
@@ -395,7 +413,7 @@ class DigitalTwin:
             v2i_sum,
         )
 
-    def _draw_interval_tables(self) -> link.IntervalTables:
+    def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
         x = self._platoon.position_m
         moved = abs(x - self._shadow_position_m)
@@ -427,19 +445,32 @@ class DigitalTwin:
             rp,
         )
         return link.build_interval_tables(
-            v2v_db, v2i_db, rp, self.subframes_per_interval, g, self.topology
+            v2v_db,
+            v2i_db,
+            rp,
+            self.subframes_per_interval,
+            g,
+            self.topology,
+            workspace=self._workspace,
+            out=self.tables if reuse else None,
+            fading_draws=self.fading_draws,
         )
 
-    def _rra_observation_buffer(self, tables: link.IntervalTables):
+    def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
         occupancy and bits left (filled per subframe), time left, the recipients' control
         state and the features that predict their IVoI (constant over the interval).
 
-        In the backend's arrays.
+        In the backend's arrays; with ``reuse`` (torch) written over the last interval's.
         """
         t, b, n_l = self.subframes_per_interval, self.batch_size, self.num_links
         pp, lay, platoon = self.params.platoon, self.rra_layout, self._platoon
-        csi = link.rra_static_observation(tables, self.params.radio, self._const.noise_mw)
+        shape = (t, b, n_l, self.rra_obs_dim)
+        old = getattr(self, "_rra_obs", None)
+        if reuse and old is not None and tuple(old.shape) == shape and old.is_contiguous():
+            obs = old
+        else:
+            obs = self.ns.empty(shape)
         gap_error, speed_error = spacing_errors(platoon, pp)
         control = clamp(
             stack(
@@ -457,15 +488,27 @@ class DigitalTwin:
         history = clamp(
             self._command_history / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
         )
-        obs = self.ns.empty((t, b, n_l, self.rra_obs_dim))
-        obs[..., lay.csi] = csi
-        obs[..., lay.occupancy] = 0.0
-        obs[..., lay.bits_left] = 1.0
+        # one subframe's slot [B, L, D], copied to all T (one contiguous copy, not a strided
+        # write per feature); the CSI and the time left are written over it
+        slot = self.ns.empty((b, n_l, self.rra_obs_dim))
+        slot[..., lay.csi] = 0.0
+        slot[..., lay.occupancy] = 0.0
+        slot[..., lay.bits_left] = 1.0
+        slot[..., lay.time_left] = 0.0
+        slot[..., lay.control] = control
+        slot[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
+        slot[..., lay["cam_delay_history"]] = self._cam_delay_history
+        slot[..., lay["command_history"]] = history
+        obs[...] = slot
         obs[..., lay.time_left] = self._time_left[:, None, None]
-        obs[..., lay.control] = control
-        obs[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
-        obs[..., lay["cam_delay_history"]] = self._cam_delay_history
-        obs[..., lay["command_history"]] = history
+        if not link.link_major(b, self.ns.numpy):
+            obs[..., lay.csi] = link.rra_static_observation(
+                tables, self.params.radio, self._const.noise_mw
+            )
+        else:
+            link.fill_rra_static_observation(
+                tables, self.params.radio, self._const.noise_mw, obs[..., lay.csi], self._workspace
+            )
         return obs
 
     # ------------------------------------------------------------------ subframes
