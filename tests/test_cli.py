@@ -314,12 +314,28 @@ def _prevalidate(command: str, overrides: list[str]) -> None:
     cli.app.prevalidate(command, hargs, [*hargs.overrides, f"hydra.job.name={command}"])
 
 
+#: what an option needs besides itself: the user's own policy names one (control=policy, rra=policy)
+USER_POLICIES = """
+from vdtn_marl.policies import CACCController, make_rra_baseline
+
+
+def control(params, seed):
+    return CACCController(params.platoon)
+
+
+def rra(params, seed):
+    return make_rra_baseline("greedy", params, seed)
+"""
+
+
 @pytest.mark.parametrize("group", ["scenario", "algo", "control", "rra", "experiment"])
-def test_every_group_option_composes_and_validates(group):
+def test_every_group_option_composes_and_validates(group, tmp_path):
     options = cli_help.group_options(group)
     assert options, group
+    (tmp_path / "user_policies.py").write_text(USER_POLICIES)
     for option in options:
-        _prevalidate("jocc", [f"{group}={option}"])
+        needs = [f"{group}.policy={tmp_path / 'user_policies.py'}:{group}"] * (option == "policy")
+        _prevalidate("jocc", [f"{group}={option}", *needs])
 
 
 def test_group_options_as_documented():

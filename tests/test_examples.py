@@ -38,3 +38,37 @@ def test_train_pi_star_torchrl_runs_and_compares_with_cacc(tmp_path):
     scores = dict(re.findall(r"^\s+(pi_star|cacc)\b.*?(-?\d+\.\d{4})", result.stdout, flags=re.M))
     assert set(scores) == {"pi_star", "cacc"}
     assert all(math.isfinite(float(v)) and float(v) <= 0.0 for v in scores.values())
+
+
+def test_my_rra_runs_as_its_docstring_says(tmp_path, monkeypatch):
+    """examples/my_rra.py: the `vdtn-marl jocc` line of its docstring runs, and the policy is
+    the allocation it describes."""
+    import json
+    import shlex
+
+    import torch
+
+    from vdtn_marl import cli
+    from vdtn_marl.experiment.user_policy import load_policy
+    from vdtn_marl.sim.layout import RRAFeatureLayout
+    from vdtn_marl.sim.params import TwinParams
+
+    script = next(p for p in EXAMPLES if p.name == "my_rra.py")
+    line = next(
+        line.strip() for line in script.read_text().splitlines() if "vdtn-marl jocc" in line
+    )
+    argv = shlex.split(line.replace("examples/my_rra.py", str(script)))[1:]
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*argv, "hydra.run.dir=run", "progress=false"]) == 0
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["rra"] == "policy" and summary["cam_delivery_rate"] > 0
+
+    params = TwinParams()
+    policy = load_policy("rra.policy", f"{script}:make_policy", params, seed=0)
+    layout = RRAFeatureLayout.from_radio(params.radio)
+    observation = torch.zeros(2, 3, layout.dim)
+    observation[0, :, layout.bits_left] = 1.0  # scenario 0: every CAM pending; 1: delivered
+    actions = policy(observation)
+    levels = params.radio.num_power_levels
+    assert actions[0].tolist() == [0 * levels, 1 * levels, 2 * levels]  # own sub-channel, 23 dBm
+    assert (actions[1] % levels == levels - 1).all()  # silent once delivered: "off"

@@ -1061,3 +1061,83 @@ def test_report_of_cells_with_different_n(tmp_path):
     written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
     assert "target" not in _strict_json(written["json"])
     assert "## Target" not in written["markdown"].read_text(encoding="utf-8")
+
+
+# --- submissions: methods of the user's own beside the benchmark's ---------------------------
+
+
+def test_submissions_run_on_every_seed_of_their_scenario_after_the_methods():
+    cfg = _bench(methods={"a": ["rra=random"], "b": []}, extra_seeds={"platoon4": {"b": [3, 2]}})
+    cfg.submissions = {"mine": ["rra=greedy"]}
+    config.validate_benchmark(cfg)
+    names = [c.name for c in leaderboard.plan(cfg)]
+    assert names == [
+        *(f"platoon4/{m}/seed{s}" for s in (0, 1) for m in ("a", "b", "mine")),
+        "platoon4/b/seed2", "platoon4/mine/seed2", "platoon4/b/seed3", "platoon4/mine/seed3",
+    ]  # fmt: skip
+    mine = [c for c in leaderboard.plan(cfg) if c.method == "mine"][0]
+    assert mine.overrides[2:4] == ("rra=greedy", "seed=0")  # its overrides, no budget
+    # the definition is the benchmark's: the manifest keeps the submissions apart, and an
+    # out_dir of the definition accepts runs with and without them
+    written = leaderboard.manifest(cfg)
+    assert "mine" not in written["benchmark"]["methods"]
+    assert written["submissions"] == {"mine": ["rra=greedy"]}
+    assert leaderboard.with_submissions(cfg).benchmark.methods["mine"] == ["rra=greedy"]
+
+
+@pytest.mark.parametrize(
+    ("submissions", "message"),
+    [
+        ({"a": ["rra=greedy"]}, "submissions.a has the name of a method"),
+        ({"my method": ["rra=greedy"]}, "submissions.my method is not a plain name"),
+        ({"mine": ["seed=3"]}, "submissions.mine sets 'seed=3'"),
+        ({"mine": "rra=greedy"}, "submissions.mine='rra=greedy' must be a list"),
+    ],
+)
+def test_bad_submissions_are_rejected(submissions, message):
+    cfg = _bench()
+    cfg.submissions = submissions
+    with pytest.raises(ConfigError, match=re.escape(message)):
+        config.validate_benchmark(cfg)
+
+
+def test_out_dir_of_the_definition_takes_submissions(tmp_path):
+    cfg = _bench()
+    cfg.out_dir = str(tmp_path)
+    (tmp_path / leaderboard.MANIFEST_FILE).write_text(json.dumps(leaderboard.manifest(cfg)))
+    cfg.submissions = {"mine": ["rra=greedy"]}
+    leaderboard.check_out_dir(cfg)  # the definition is unchanged
+    cfg.benchmark.seeds = [0, 1, 2]
+    with pytest.raises(leaderboard.LeaderboardError, match="benchmark.seeds"):
+        leaderboard.check_out_dir(cfg)
+
+
+def test_report_puts_a_submission_beside_the_methods(tmp_path):
+    cfg = _bench(methods={"a": [], "b": []}, seeds=[0, 1, 2])
+    cfg.submissions = {"c": ["rra=greedy"]}
+    cfg.out_dir, cfg.report_dir = str(tmp_path / "runs"), str(tmp_path / "report")
+    config.validate_benchmark(cfg)
+    cells = leaderboard.plan(cfg)
+    composed = {}
+    for cell in cells:
+        data = {
+            "seed": cell.seed,
+            "scenario": {"name": "platoon4", "traces": "udds", "trace_path": None},
+            "experiment": {"name": "t", "jocc_iterations": 1, "eval_episodes": 2,
+                           "eval_intervals": 5},
+            "algo": {"num_envs": 2, "rollout_steps": 8, "rra_rollout_steps": 16},
+            "rra": {"name": "jocc", "kappa1": 0.5}, "control": {"name": "learned"},
+        }  # fmt: skip
+        _fake_run(cfg, cell, data)
+        composed[cell] = (data, None)
+    written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
+    data = _strict_json(written["json"])
+    assert "c" not in data["definition"]["methods"] and data["submissions"] == {"c": ["rra=greedy"]}
+    stats = data["statistics"]["platoon4"]
+    assert list(stats) == ["a", "b", "c"]
+    assert stats["c"]["gap_error_abs_m"]["mean"] == pytest.approx(0.5 * 1.3 + 0.02)
+    markdown = written["markdown"].read_text()
+    assert "| c | `rra=greedy` (submission) |" in markdown
+    assert "- **submissions**: c:" in markdown
+    row = [line for line in markdown.splitlines() if line.startswith("| c | 3 |")]
+    assert len(row) == 1  # its row in the scenario's table, with its 3 runs

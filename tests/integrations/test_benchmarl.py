@@ -219,3 +219,81 @@ def test_benchmarl_trains_ippo_for_one_iteration_through_its_python_api(vb, tmp_
     )
     experiment.run()
     assert experiment.n_iters_performed == 1 and experiment.total_frames == 40
+
+
+@benchmarl_installed
+@pytest.mark.slow
+def test_a_benchmarl_checkpoint_is_a_policy_of_the_benchmark(vb, tmp_path):
+    """`rra.policy=<BenchMARL checkpoint>`: the trained weights act, deterministically, and
+    nothing is written beside the checkpoint; a `vdtn-marl jocc` run takes it."""
+    import json
+
+    import torch
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models.mlp import MlpConfig
+
+    from vdtn_marl.algos.ppo import ActorPolicy
+    from vdtn_marl.experiment.user_policy import load_policy
+    from vdtn_marl.sim.params import TwinParams
+
+    config = ExperimentConfig.get_from_yaml()
+    config.max_n_iters = 1
+    config.loggers = []
+    config.render = False
+    config.evaluation = False
+    config.checkpoint_at_end = True
+    config.save_folder = str(tmp_path)
+    config.on_policy_collected_frames_per_batch = 100
+    config.on_policy_n_envs_per_worker = 2
+    config.on_policy_n_minibatch_iters = 1
+    config.on_policy_minibatch_size = 50
+    experiment = Experiment(
+        task=vb.VDTNTask.RRA.get_task({"episode_intervals": 1}),
+        algorithm_config=MappoConfig.get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=0,
+        config=config,
+    )
+
+    def weights(module) -> dict:  # tensordict 0.11 adds __batch_size, __device entries
+        return {k: v.clone() for k, v in module.state_dict().items() if torch.is_tensor(v)}
+
+    initial = weights(experiment.policy)
+    experiment.run()
+    (checkpoint,) = tmp_path.rglob("checkpoint_*.pt")
+    listing = sorted(str(p) for p in tmp_path.rglob("*"))
+
+    policy = load_policy("rra.policy", str(checkpoint), TwinParams(), seed=0)
+    trained, loaded = weights(experiment.policy), weights(policy.actor)
+    assert trained.keys() == loaded.keys()
+    assert all(torch.equal(trained[k], loaded[k]) for k in trained)  # the trained weights ...
+    assert any(not torch.equal(initial[k], trained[k]) for k in trained)  # ... not the initial
+    observation = torch.randn(5, 3, experiment.observation_spec["rra", "observation"].shape[-1])
+    assert torch.equal(policy(observation), ActorPolicy(experiment.policy, "rra")(observation))
+    assert sorted(str(p) for p in tmp_path.rglob("*")) == listing
+
+    run = subprocess.run(
+        [sys.executable, "-m", "vdtn_marl.cli", "jocc", "experiment=smoke", "control=cacc",
+         "rra=policy", f"rra.policy={checkpoint}", f"hydra.run.dir={tmp_path / 'run'}",
+         "progress=false"],
+        capture_output=True, text=True, cwd=tmp_path,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr[-3000:]
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["rra"] == "policy" and summary["config"]["rra"]["policy"] == str(checkpoint)
+    assert sorted(str(p) for p in tmp_path.rglob("*") if "run" not in p.parts) == listing
+
+
+@benchmarl_installed
+def test_a_benchmarl_checkpoint_outside_its_folder_is_one_line(vb, tmp_path):
+    import torch
+
+    from vdtn_marl.errors import ConfigError
+    from vdtn_marl.experiment.user_policy import check_policy
+
+    lone = tmp_path / "checkpoint_100.pt"
+    torch.save({"state": {"total_frames": 100}, "loss_rra": {}}, lone)
+    with pytest.raises(ConfigError, match="rra.policy=.*config.pkl"):
+        check_policy("rra.policy", str(lone))

@@ -113,21 +113,23 @@ def _validate_bench(data: dict, check_runs: bool = True) -> None:
         _require_option("benchmark.scenarios", scenario, "scenario")
     if not check_runs:
         return
-    # Every scenario × method must compose into a valid run (seeds only change `seed`), and
-    # the methods of a scenario must share its held-out evaluation scenarios.
+    # Every scenario × method (and submission) must compose into a valid run (seeds only change
+    # `seed`), and the methods of a scenario must share its held-out evaluation scenarios.
     composed = {}
+    b = leaderboard.with_submissions(bench_cfg).benchmark
     for scenario in b.scenarios:
         for method in b.methods:
             overrides = [
                 *leaderboard.cell_overrides(b, scenario, method),
                 f"device={bench_cfg.device}",
             ]
+            where = "submissions" if method in bench_cfg.submissions else "benchmark.methods"
             try:
                 data = job_config(compose_config("config", overrides))
                 to_run_config(data)
             except Exception as exc:
                 raise CLIError(
-                    f"benchmark.methods.{method}={list(b.methods[method])} on scenario "
+                    f"{where}.{method}={list(b.methods[method])} on scenario "
                     f"{scenario}: {translate(exc, 'config', overrides)}"
                 ) from exc
             composed[leaderboard.Cell(scenario, method, 0, tuple(overrides))] = data

@@ -12,7 +12,7 @@ and with which reward), ``experiment`` (budgets).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field, fields, is_dataclass
+from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
 from vdtn_marl.algos.params import AlgoConfig
@@ -29,11 +29,13 @@ from vdtn_marl.voi.registry import IVOI_ESTIMATORS as IVOI_ESTIMATOR_REGISTRY
 
 ALGOS = tuple(ALGORITHMS)  # algo.name (vdtn_marl/algos/trainer.py)
 # control.name: a learned policy or a baseline of the registry that may drive a run
-CONTROLS = ("learned", *(n for n, b in CONTROL_BASELINES.items() if b.in_runs))
+# (or "policy": the user's own, control.policy; vdtn_marl/experiment/user_policy.py)
+CONTROLS = ("learned", *(n for n, b in CONTROL_BASELINES.items() if b.in_runs), "policy")
 RRA_CREDITS = ("interval", "subframe")  # values of algo.rra_credit
 MPC_CONTROLS = tuple(n for n, b in CONTROL_BASELINES.items() if b.solver_steps)  # mpc_iterations
 LEARNED_RRA = REWARD_KINDS  # an RRA policy is learned from one of these rewards ...
 RRA_METHODS = LEARNED_RRA + tuple(RRA_BASELINES)  # ... or is a baseline of the registry
+RRA_METHODS += ("policy",)  # ... or is the user's own (rra.policy; experiment/user_policy.py)
 IVOI_ESTIMATORS = tuple(IVOI_ESTIMATOR_REGISTRY)  # rra.ivoi_estimator (vdtn_marl/voi/registry.py)
 VALUE_FITS = ("none", "acting")  # rra.value_fit (vdtn_marl/algos/value_fit.py)
 LR_SCHEDULES = ("constant", "linear")
@@ -105,6 +107,9 @@ class ControlConfig:
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
     # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies.mpc_oracle)
     mpc_iterations: int | None = None
+    # control=policy: the user's control policy (π̃ is not trained; π* still is, as the
+    # reference): module:factory, file.py:factory, or a TorchRL/BenchMARL checkpoint (.pt)
+    policy: str | None = None
 
 
 @dataclass
@@ -129,6 +134,9 @@ class RRAConfig:
     ivoi_scale: float = RRAReward.ivoi_scale  # multiplies ξ before κ2
     miss_penalty: float = RRAReward.miss_penalty  # drra: penalty of a CAM that misses its interval
     aoi_scale: float = RRAReward.aoi_scale  # aoi: reward units per ms of Age of Information
+    # rra=policy: the user's RRA policy (no RRA agents are trained): module:factory,
+    # file.py:factory, or a TorchRL/BenchMARL checkpoint (.pt)
+    policy: str | None = None
 
     @property
     def learned(self) -> bool:
@@ -205,6 +213,27 @@ def _real(key: str, value: Any, low: float, high: float, *, low_open: bool = Fal
         raise ConfigError(f"{key}={value!r} is outside the allowed range {bracket}{low}, {high}]")
 
 
+def _check_user_policies(control: ControlConfig, rra: RRAConfig) -> None:
+    """``control.policy`` goes with ``control=policy`` and ``rra.policy`` with ``rra=policy``;
+    each names a policy that resolves (experiment/user_policy.py)."""
+    from vdtn_marl.experiment.user_policy import check_policy
+
+    for group, section in (("control", control), ("rra", rra)):
+        key = f"{group}.policy"
+        if section.name == "policy":
+            if section.policy is None:
+                raise ConfigError(
+                    f"{key}=None: {group}=policy needs {key}=<module:factory, file.py:factory "
+                    "or a .pt checkpoint>"
+                )
+            check_policy(key, section.policy)
+        elif section.policy is not None:
+            raise ConfigError(
+                f"{key}={section.policy!r} is set but {group}={section.name}; a policy of "
+                f"your own needs {group}=policy (then {key} acts instead of {section.name})"
+            )
+
+
 def _check_task(cfg: RunConfig) -> None:
     """``task=rra`` (of ``vdtn-marl train``) needs RRA agents that learn."""
     if cfg.task == "rra" and not cfg.rra.learned:
@@ -235,6 +264,7 @@ def validate(cfg: RunConfig) -> RunConfig:
             "predictor saved by vdtn_marl.algos.completion.train_completion_predictor"
         )
     _choice("rra.name", r.name, RRA_METHODS)
+    _check_user_policies(c, r)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
     _choice("rra.value_fit", r.value_fit, VALUE_FITS)
     _positive_int("rra.value_fit_horizon", r.value_fit_horizon, high=100_000)
@@ -511,6 +541,10 @@ class BenchConfig:
     # the report also writes videos of the trace methods on their best and worst held-out
     # scenario (vdtn_marl/leaderboard/videos.py; needs vdtn-marl[video])
     video: bool = False
+    # methods of the user's own, {name: [overrides]} like benchmark.methods (e.g. [rra=policy,
+    # rra.policy=my_rra.py:make_policy]): run on every scenario and seed of the benchmark,
+    # reported beside its methods, not part of its definition (docs/leaderboard.md)
+    submissions: dict[str, list[str]] = field(default_factory=dict)
     video_format: str = "gif"  # gif or mp4
 
 
@@ -559,11 +593,25 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
                 f"benchmark.methods.{method} is not a plain name (letters, digits, _ . + -); "
                 "it names the method's directory"
             )
+    for name in cfg.submissions:
+        if not re.fullmatch(_NAME_PATTERN, str(name)):
+            raise ConfigError(
+                f"submissions.{name} is not a plain name (letters, digits, _ . + -); it names "
+                "the method's directory"
+            )
+        if name in b.methods:
+            raise ConfigError(
+                f"submissions.{name} has the name of a method of benchmark {b.name!r}; "
+                f"allowed: a name other than {', '.join(b.methods)}"
+            )
     for where, overrides in [
         ("benchmark.overrides", b.overrides),
         *((f"benchmark.methods.{m}", o) for m, o in b.methods.items()),
         *((f"benchmark.budgets.{m}", o) for m, o in b.budgets.items()),
+        *((f"submissions.{m}", o) for m, o in cfg.submissions.items()),
     ]:
+        if isinstance(overrides, str) or not isinstance(overrides, Sequence):
+            raise ConfigError(f"{where}={overrides!r} must be a list of overrides")
         for item in overrides:
             key = str(item).partition("=")[0].lstrip("+~")
             if key.split(".")[0].split("/")[0] in BENCHMARK_RESERVED_KEYS or key == "experiment":
@@ -608,9 +656,26 @@ def selected_cells(patterns: Sequence[str], names: Sequence[str]) -> list[str]:
     return [n for n in names if any(fnmatchcase(n, p) for p in patterns)]
 
 
+def with_submissions(cfg: BenchConfig) -> BenchConfig:
+    """``cfg`` with its ``submissions`` as methods of the benchmark after the built-in ones,
+    each run on the benchmark's ``seeds`` and, per scenario, on every extra seed any method
+    has there (so that it pairs with every method). The definition itself is ``cfg``'s: this
+    is what runs and what the report covers."""
+    if not cfg.submissions:
+        return cfg
+    b = cfg.benchmark
+    extra = {scenario: dict(by_method) for scenario, by_method in (b.extra_seeds or {}).items()}
+    for by_method in extra.values():
+        seeds = sorted({int(s) for method_seeds in by_method.values() for s in method_seeds})
+        for name in cfg.submissions:
+            by_method[name] = seeds
+    methods = {**b.methods, **{k: list(v) for k, v in cfg.submissions.items()}}
+    return replace(cfg, benchmark=replace(b, methods=methods, extra_seeds=extra))
+
+
 def _validate_cell_patterns(cfg: BenchConfig) -> None:
     """``cells``: a list of glob patterns, each matching at least one cell of the grid."""
-    b = cfg.benchmark
+    b = with_submissions(cfg).benchmark
     patterns = cfg.cells if cfg.cells is not None else []
     if isinstance(patterns, str) or not isinstance(patterns, Sequence):
         raise ConfigError(

@@ -18,7 +18,9 @@ One JOCC iteration runs four stages:
 
 ``vdtn-marl train`` runs a subset of the stages (see :data:`TASK_STAGES`). Baselines slot in
 by configuration: ``control=cacc|oracle`` replaces π̃, ``rra=random|round_robin|greedy``
-replaces the learned RRA policy (their training stages are skipped).
+replaces the learned RRA policy (their training stages are skipped); so does a policy of the
+user's own (``control=policy control.policy=...``, ``rra=policy rra.policy=...``:
+:mod:`.user_policy`).
 
 This module holds the stages and their order. Checkpoints (``checkpoints/last.pt``, written
 every ``experiment.checkpoint_every`` PPO iterations and at the end of every stage; ``resume=true``
@@ -161,8 +163,8 @@ class JointOptimisation:
         self.pi_star = make_trainer(
             VDTNTorchRLEnv("control", **env_kw), "vehicle", algo, seed=cfg.seed * 8, prior=cacc
         )
-        first_rra = "random" if self.rra_learned else rra.name
-        self.rra_slot = SwitchablePolicy(make_rra_baseline(first_rra, self.params, cfg.seed))
+        self._user_policies: dict[str, Any] = {}  # rra=policy, control=policy: built once
+        self.rra_slot = SwitchablePolicy(self.rra_policy(untrained=True))
         drop = () if control.augmentation else AUGMENTATION_FEATURES
         completion_kw = dict(
             completion=control.completion, completion_predictor=control.completion_predictor
@@ -236,16 +238,32 @@ class JointOptimisation:
         if self.control_learned:
             return ActorPolicy(self.pi_tilde.actor, "vehicle")
         control = self.cfg.control
+        if control.name == "policy":
+            return self.user_policy("control.policy", control.policy)
         solver = {} if control.mpc_iterations is None else {"iterations": control.mpc_iterations}
         return make_control_baseline(control.name, self.params, **solver)
 
-    def rra_policy(self):
-        """The current RRA policy: the learned one once trained (uniformly random before)."""
+    def rra_policy(self, untrained: bool = False):
+        """The current RRA policy: the learned one once trained (uniformly random before, and
+        with ``untrained``), the user's (``rra=policy``) or a baseline."""
         if self.rra_learned:
-            if self.rra.iteration == 0:
+            if untrained or self.rra.iteration == 0:
                 return make_rra_baseline("random", self.params, self.cfg.seed)
             return ActorPolicy(self.rra.actor, "rra")
+        if self.cfg.rra.name == "policy":
+            return self.user_policy("rra.policy", self.cfg.rra.policy)
         return make_rra_baseline(self.cfg.rra.name, self.params, self.cfg.seed)
+
+    def user_policy(self, key: str, spec: str):
+        """The user's policy ``spec`` for ``key`` (``rra.policy``, ``control.policy``), built
+        once per run (:func:`~vdtn_marl.experiment.user_policy.load_policy`)."""
+        if key not in self._user_policies:
+            from vdtn_marl.experiment.user_policy import load_policy
+
+            self._user_policies[key] = load_policy(
+                key, spec, self.params, self.cfg.seed, self.device
+            )
+        return self._user_policies[key]
 
     def trainers(self) -> dict[str, Trainer]:
         out = {"pi_star": self.pi_star, "pi_tilde": self.pi_tilde}

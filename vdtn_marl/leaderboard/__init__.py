@@ -59,6 +59,7 @@ from vdtn_marl.leaderboard.grid import (
     compose_cell,
     manifest,
     plan,
+    with_submissions,
 )
 from vdtn_marl.leaderboard.report import (
     MARL_EVAL_JSON,
@@ -126,5 +127,6 @@ __all__ = [
     "run_benchmark",
     "statistics",
     "t_ci",
+    "with_submissions",
     "write_report",
 ]

@@ -21,7 +21,7 @@ from vdtn_marl.experiment.compose import (
     to_run_config,
     translate,
 )
-from vdtn_marl.experiment.config import BenchConfig, BenchmarkConfig
+from vdtn_marl.experiment.config import BenchConfig, BenchmarkConfig, with_submissions
 from vdtn_marl.experiment.metrics import (
     CAM_LATENCY_KEYS,  # noqa: F401
     METRIC_KEYS,  # noqa: F401
@@ -77,8 +77,9 @@ def cell_overrides(
 def plan(cfg: BenchConfig) -> list[Cell]:
     """Every cell, seed by seed (so a partial run has every method on the first seeds): the
     cells of ``seeds``, then those of ``extra_seeds``, again seed by seed (each seed in the
-    benchmark's order of scenarios and methods)."""
-    b = cfg.benchmark
+    benchmark's order of scenarios and methods; ``submissions`` come after the methods:
+    :func:`with_submissions`)."""
+    b = with_submissions(cfg).benchmark
 
     def cell(scenario: str, method: str, seed: int) -> Cell:
         return Cell(scenario, method, int(seed), tuple(cell_overrides(b, scenario, method, seed)))
@@ -158,7 +159,10 @@ RUN_FIELDS = (
 
 def manifest(cfg: BenchConfig) -> dict[str, Any]:
     b = cfg.benchmark
-    return {"name": b.name, "version": b.version, "benchmark": asdict(b)}
+    out = {"name": b.name, "version": b.version, "benchmark": asdict(b)}
+    if cfg.submissions:  # not part of the definition (check_out_dir ignores them)
+        out["submissions"] = {k: list(v) for k, v in cfg.submissions.items()}
+    return out
 
 
 def check_out_dir(cfg: BenchConfig) -> None:

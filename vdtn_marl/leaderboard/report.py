@@ -21,7 +21,7 @@ from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.experiment.config import BenchConfig
 from vdtn_marl.experiment.metrics import AOI_KEYS, METRICS
 from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
-from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan
+from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan, with_submissions
 from vdtn_marl.leaderboard.plots import write_plots
 from vdtn_marl.leaderboard.stats import (
     IQM_TRIM,
@@ -226,6 +226,12 @@ def _markdown(
         "better, ↑ higher); EVoI = J̃ − J* (discounted return of the acting system minus that "
         "of π* with perfect observation, per follower) has no best.",
     ]
+    if cfg.submissions:
+        lines.append(
+            f"- **submissions**: {', '.join(cfg.submissions)}: methods of the user's own "
+            "(`submissions`), not part of the definition, run on the same scenarios and seeds "
+            "and evaluated on the same held-out scenarios as its methods"
+        )
     if fallbacks:
         lines.append(
             f"- **BCa undefined** for {fallbacks} interval(s) (degenerate samples, e.g. all runs "
@@ -249,6 +255,8 @@ def _markdown(
     for method, overrides in b.methods.items():
         extra = b.budgets.get(method, [])
         text = f"`{' '.join(overrides)}`" + (f"; `{' '.join(extra)}`" if extra else "")
+        if method in cfg.submissions:
+            text += " (submission)"
         done = [r for r in rows if r["method"] == method]
         counts = "–"
         if done:
@@ -397,6 +405,8 @@ def write_report(
             composed = {cell: compose_cell(cell, cfg.device) for cell in cells}
     report_dir = Path(cfg.report_dir or cfg.out_dir)
     report_dir.mkdir(parents=True, exist_ok=True)
+    definition = asdict(cfg.benchmark)
+    cfg = with_submissions(cfg)  # the user's methods beside the benchmark's
     b = cfg.benchmark
     rows = collect_runs(cfg, cells, composed)
     if not rows:
@@ -416,8 +426,10 @@ def write_report(
         "vdtn_marl_version": __version__,
         "command": command,
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-        "definition": asdict(b),
-    }
+        "definition": definition,
+        **({"submissions": {k: list(v) for k, v in cfg.submissions.items()}}
+           if cfg.submissions else {}),
+    }  # fmt: skip
     written: dict[str, Path] = {}
     written["json"] = atomic_write_json(
         report_dir / STATS_JSON,
