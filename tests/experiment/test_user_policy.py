@@ -268,3 +268,25 @@ def test_bench_scores_a_submission_beside_the_benchmarks_methods(policies):
     assert "(submission)" in (policies / "lb" / "LEADERBOARD.md").read_text()
     manifest = json.loads((policies / "lb" / "benchmark.json").read_text())
     assert "mine" not in manifest["benchmark"]["methods"] and "mine" in manifest["submissions"]
+
+
+def test_a_control_actor_checkpoint_drives_the_followers(tmp_path, monkeypatch):
+    from vdtn_marl.algos.networks import make_actor
+    from vdtn_marl.algos.ppo import ActorPolicy
+    from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
+
+    env = VDTNTorchRLEnv("control_impaired", batch_size=2, seed=0)
+    actor = make_actor(env.full_observation_spec, env.full_action_spec, "vehicle")
+    torch.save(actor, tmp_path / "control.pt")
+    policy = user_policy.load_policy(
+        "control.policy", str(tmp_path / "control.pt"), TwinParams(), 0
+    )
+    observation = env.reset()["vehicle", "observation"]
+    commands = policy(observation)
+    assert torch.equal(commands, ActorPolicy(actor, "vehicle")(observation))
+    assert commands.dtype == torch.float32 and commands.shape == observation.shape[:-1]
+    monkeypatch.chdir(tmp_path)
+    summary = _jocc(
+        "run", "control=policy", f"control.policy={tmp_path / 'control.pt'}", "rra=greedy"
+    )
+    assert summary["control"] == "policy" and summary["trainer_iterations"]["pi_tilde"] == 0
