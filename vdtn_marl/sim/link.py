@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
-from functools import lru_cache
+from functools import cache, lru_cache
 
 import numpy as np
 import torch
@@ -484,13 +484,13 @@ def subframe_step(
 
     On torch the sums over links add in the order of the ``[B, L, M]`` formulation's batched
     matmul and sum over the link axis: in link order, 0 + x_0 + x_1 + …, each term rounded to
-    float32 before it is added, where that is their order (:func:`_torch_adds_in_link_order`:
-    the case study's shapes), else by calling them on ``[B, ...]`` copies (tested against
-    that formulation, tests/sim/test_physics.py). On NumPy arrays the V2V
-    interference is NumPy's matmul, whose order is BLAS's (the single-scenario path's own
-    numbers: in about 0.4 % of the subframes in which two interferers share a receiver's
-    sub-channel it differs from torch's in the last bit). On torch from
-    :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
+    float32 before it is added, where that is their order on this machine
+    (:func:`_torch_adds_in_link_order`, measured once per shape), else by calling them on
+    ``[B, ...]`` copies (tested against that formulation, tests/sim/test_physics.py). On
+    NumPy arrays the V2V interference is NumPy's matmul, whose order is BLAS's (the
+    single-scenario path's own numbers: in about 0.4 % of the subframes in which two
+    interferers share a receiver's sub-channel it differs from torch's in the last bit). On
+    torch from :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
     (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it this
     function's own ``[B, L, M]`` code.
     """
@@ -578,14 +578,38 @@ def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -
 
 
 def _torch_adds_in_link_order(links: int, subchannels: int, device: torch.device) -> bool:
-    """Whether torch's CPU batched matmul ``[B, L, L] @ [B, L, M]`` and its sum of a
-    ``[B, L, M]`` array over the links both add in link order, 0 + x_0 + x_1 + …, each term
-    rounded to float32 first (torch 2.13, measured for L ≤ 63, M ≤ 12; pinned by
-    tests/sim/test_physics.py): for L < 5 with M ≤ 4, and for M = 4 (the case study's
-    sub-channels) with L < 18. Elsewhere, and on CUDA, they block the sums otherwise."""
-    if device.type != "cpu" or not 1 <= subchannels <= 4:
+    """Whether torch's batched matmul ``[B, L, L] @ [B, L, M]`` and its sum of a ``[B, L, M]``
+    array over the links both add in link order, 0 + x_0 + x_1 + …, each term rounded to
+    float32 first, on this machine (:func:`_probe_link_order`, once per shape). The order is
+    BLAS's and torch's choice and depends on the CPU (L = 15, M = 4 is in order on the
+    machine where the link-major layout was first measured, not on an AVX-512 x86-64 CPU);
+    it is always False on CUDA."""
+    if device.type != "cpu":
         return False
-    return links < 5 or (subchannels == 4 and links < 18)
+    return _probe_link_order(links, subchannels)
+
+
+#: scenarios of the probe: any other order shows in the last bits of some of its sums
+_PROBE_BATCH = 64
+
+
+@cache
+def _probe_link_order(links: int, subchannels: int) -> bool:
+    """Measure whether the matmul and the sum of :func:`_torch_adds_in_link_order` add in link
+    order for ``links`` × ``subchannels``: both on heavy-tailed float32 data (log-normal, as
+    path gains are), compared bit for bit with the sums written out in link order."""
+    generator = torch.Generator().manual_seed(links * 1000 + subchannels)
+    shape = (_PROBE_BATCH, links)
+    cross = torch.exp(3.0 * torch.randn(*shape, links, generator=generator))
+    onehot = torch.exp(3.0 * torch.randn(*shape, subchannels, generator=generator))
+    in_order = cross[:, :, 0, None] * onehot[:, None, 0, :]
+    summed = onehot[:, 0]
+    for j in range(1, links):
+        in_order = in_order + cross[:, :, j, None] * onehot[:, None, j, :]
+        summed = summed + onehot[:, j]
+    return bool(
+        torch.equal(torch.matmul(cross, onehot), in_order) and torch.equal(onehot.sum(1), summed)
+    )
 
 
 def _sum_links_link_major(terms: torch.Tensor, in_link_order: bool) -> torch.Tensor:
