@@ -1,6 +1,7 @@
-# Sourced by scripts/benchmarl_check.sh and scripts/ray_check.sh: builds the environment of an
-# optional extra apart from the main .venv, with its own constraints file, as the README's
-# installation does for the main one (torch first, on its own, then the package pinned).
+# Sourced by scripts/benchmarl_check.sh, scripts/ray_check.sh and scripts/extras_check.sh:
+# builds the environment of an optional extra apart from the main .venv, with its own
+# constraints file, as the README's installation does for the main one (torch first, on its
+# own, then the package pinned).
 #
 #   extra_venv_setup VENV CONSTRAINTS EXTRAS [NO_DEPS_PACKAGE ...]
 #

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -202,9 +203,16 @@ def test_wandb_offline_writes_the_run_without_a_network(tmp_path, monkeypatch):
     monkeypatch.setenv("HTTPS_PROXY", "http://127.0.0.1:9")  # any network use would fail
     _log_two_rows(tmp_path, ["csv", "wandb"])
     (run,) = (tmp_path / "wandb").glob("offline-run-*/run-*.wandb")
-    # the run's record (protobuf, read by `wandb sync`) holds the scalars, name and config
+    # the run's record (protobuf, read by `wandb sync`) holds the scalars, name and config;
+    # wandb's writer process may still be flushing it when `finish()` returns (wandb 0.31:
+    # about 1 first run in 15), so the test waits for it, up to 30 s
+    wanted = (b"rra/reward_mean", b"-0.25", b"-0.5", b"test run", b"rra.kappa1")
+    deadline = time.monotonic() + 30.0
     record = run.read_bytes()
-    for expected in (b"rra/reward_mean", b"-0.25", b"-0.5", b"test run", b"rra.kappa1"):
+    while not all(w in record for w in wanted) and time.monotonic() < deadline:
+        time.sleep(0.2)
+        record = run.read_bytes()
+    for expected in wanted:
         assert expected in record, expected
 
 
