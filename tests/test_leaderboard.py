@@ -979,6 +979,23 @@ def _fake_run(cfg: config.BenchConfig, cell, data: dict) -> None:
     (directory / "summary.json").write_text(json.dumps(summary))
 
 
+def _fake_grid(cfg: config.BenchConfig, cells) -> dict:
+    """Every cell finished by :func:`_fake_run`; the composed config of each (for the report)."""
+    composed = {}
+    for cell in cells:
+        data = {
+            "seed": cell.seed,
+            "scenario": {"name": "platoon4", "traces": "udds", "trace_path": None},
+            "experiment": {"name": "t", "jocc_iterations": 1, "eval_episodes": 2,
+                           "eval_intervals": 5},
+            "algo": {"num_envs": 2, "rollout_steps": 8, "rra_rollout_steps": 16},
+            "rra": {"name": "jocc", "kappa1": 0.5}, "control": {"name": "learned"},
+        }  # fmt: skip
+        _fake_run(cfg, cell, data)
+        composed[cell] = (data, None)
+    return composed
+
+
 def test_report_of_cells_with_different_n(tmp_path):
     cfg = _bench(
         methods={"a": [], "b": [], "c": []},
@@ -992,18 +1009,7 @@ def test_report_of_cells_with_different_n(tmp_path):
     config.validate_benchmark(cfg)
     cells = leaderboard.plan(cfg)
     assert len(cells) == 9 + 6
-    composed = {}
-    for cell in cells:
-        data = {
-            "seed": cell.seed,
-            "scenario": {"name": "platoon4", "traces": "udds", "trace_path": None},
-            "experiment": {"name": "t", "jocc_iterations": 1, "eval_episodes": 2,
-                           "eval_intervals": 5},
-            "algo": {"num_envs": 2, "rollout_steps": 8, "rra_rollout_steps": 16},
-            "rra": {"name": "jocc", "kappa1": 0.5}, "control": {"name": "learned"},
-        }  # fmt: skip
-        _fake_run(cfg, cell, data)
-        composed[cell] = (data, None)
+    composed = _fake_grid(cfg, cells)
     written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
     data = _strict_json(written["json"])
     assert data["cells"] == {"total": 15, "complete": 15}
@@ -1118,18 +1124,7 @@ def test_report_puts_a_submission_beside_the_methods(tmp_path):
     cfg.out_dir, cfg.report_dir = str(tmp_path / "runs"), str(tmp_path / "report")
     config.validate_benchmark(cfg)
     cells = leaderboard.plan(cfg)
-    composed = {}
-    for cell in cells:
-        data = {
-            "seed": cell.seed,
-            "scenario": {"name": "platoon4", "traces": "udds", "trace_path": None},
-            "experiment": {"name": "t", "jocc_iterations": 1, "eval_episodes": 2,
-                           "eval_intervals": 5},
-            "algo": {"num_envs": 2, "rollout_steps": 8, "rra_rollout_steps": 16},
-            "rra": {"name": "jocc", "kappa1": 0.5}, "control": {"name": "learned"},
-        }  # fmt: skip
-        _fake_run(cfg, cell, data)
-        composed[cell] = (data, None)
+    composed = _fake_grid(cfg, cells)
     written = leaderboard.write_report(cfg, command="test", cells=cells, composed=composed)
     data = _strict_json(written["json"])
     assert "c" not in data["definition"]["methods"] and data["submissions"] == {"c": ["rra=greedy"]}

@@ -192,23 +192,32 @@ def test_named_acting_parts_are_built(vb):
     assert isinstance(env.rra_policy, RoundRobinRRAPolicy)
 
 
-@benchmarl_installed
-@pytest.mark.slow
-def test_benchmarl_trains_ippo_for_one_iteration_through_its_python_api(vb, tmp_path):
-    from benchmarl.algorithms import IppoConfig
-    from benchmarl.experiment import Experiment, ExperimentConfig
-    from benchmarl.models.mlp import MlpConfig
+def _one_iteration_config(folder, frames: int):
+    """BenchMARL's experiment config for one on-policy iteration of ``frames`` frames in 2
+    scenarios, without loggers, rendering or evaluation, saving in ``folder``."""
+    from benchmarl.experiment import ExperimentConfig
 
     config = ExperimentConfig.get_from_yaml()
     config.max_n_iters = 1
     config.loggers = []
     config.render = False
     config.evaluation = False
-    config.save_folder = str(tmp_path)
-    config.on_policy_collected_frames_per_batch = 40
+    config.save_folder = str(folder)
+    config.on_policy_collected_frames_per_batch = frames
     config.on_policy_n_envs_per_worker = 2
     config.on_policy_n_minibatch_iters = 1
-    config.on_policy_minibatch_size = 20
+    config.on_policy_minibatch_size = frames // 2
+    return config
+
+
+@benchmarl_installed
+@pytest.mark.slow
+def test_benchmarl_trains_ippo_for_one_iteration_through_its_python_api(vb, tmp_path):
+    from benchmarl.algorithms import IppoConfig
+    from benchmarl.experiment import Experiment
+    from benchmarl.models.mlp import MlpConfig
+
+    config = _one_iteration_config(tmp_path, frames=40)
     experiment = Experiment(
         task=vb.VDTNTask.CONTROL_IMPAIRED.get_task({"max_cycles": 10}),
         algorithm_config=IppoConfig.get_from_yaml(),
@@ -230,24 +239,15 @@ def test_a_benchmarl_checkpoint_is_a_policy_of_the_benchmark(vb, tmp_path):
 
     import torch
     from benchmarl.algorithms import MappoConfig
-    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.experiment import Experiment
     from benchmarl.models.mlp import MlpConfig
 
     from vdtn_marl.algos.ppo import ActorPolicy
     from vdtn_marl.experiment.user_policy import load_policy
     from vdtn_marl.sim.params import TwinParams
 
-    config = ExperimentConfig.get_from_yaml()
-    config.max_n_iters = 1
-    config.loggers = []
-    config.render = False
-    config.evaluation = False
+    config = _one_iteration_config(tmp_path, frames=100)
     config.checkpoint_at_end = True
-    config.save_folder = str(tmp_path)
-    config.on_policy_collected_frames_per_batch = 100
-    config.on_policy_n_envs_per_worker = 2
-    config.on_policy_n_minibatch_iters = 1
-    config.on_policy_minibatch_size = 50
     experiment = Experiment(
         task=vb.VDTNTask.RRA.get_task({"episode_intervals": 1}),
         algorithm_config=MappoConfig.get_from_yaml(),

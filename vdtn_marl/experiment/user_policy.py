@@ -158,19 +158,29 @@ def _is_benchmarl_checkpoint(content: dict) -> bool:
 
 def check_policy(key: str, spec: Any) -> None:
     """Check ``spec`` for ``key`` (one of :data:`POLICY_KEYS`) without building the policy."""
+    _check_key_and_spec(key, spec)
+    if is_import_path(spec):
+        resolve_factory(key, spec)
+    else:
+        _policy_file(key, spec)
+
+
+def _check_key_and_spec(key: str, spec: Any) -> None:
     if key not in POLICY_KEYS:
         raise ConfigError(f"{key!r} is not one of {', '.join(POLICY_KEYS)}")
     if not isinstance(spec, str) or not spec:
         raise ConfigError(f"{key}={spec!r} must name a policy: {_FORMS}")
-    if is_import_path(spec):
-        resolve_factory(key, spec)
-        return
+
+
+def _policy_file(key: str, spec: str, device: Any = "cpu") -> tuple[str, Any]:
+    """(kind, content) of the checkpoint ``spec`` names, refused unless it can act: a module,
+    or a BenchMARL checkpoint in its experiment's folder."""
     path = Path(spec)
     if not path.is_file():
         raise ConfigError(
             f"{key}={spec!r} is neither an existing file nor an import path; allowed: {_FORMS}"
         )
-    kind, _ = _load_file(key, path)
+    kind, content = _load_file(key, path, device)
     if kind == "vdtn":
         raise ConfigError(
             f"{key}={spec!r} is a vdtn-marl run checkpoint; evaluate it with `vdtn-marl eval "
@@ -179,6 +189,7 @@ def check_policy(key: str, spec: Any) -> None:
         )
     if kind == "benchmarl":
         _benchmarl_config(key, path)
+    return kind, content
 
 
 def _benchmarl_config(key: str, path: Path) -> Path:
@@ -214,7 +225,7 @@ class ModulePolicy:
 
 def load_policy(key: str, spec: str, params, seed: int, device: Any = "cpu") -> Callable:
     """The policy ``spec`` names for ``key`` (see the module doc), on ``device``."""
-    check_policy(key, spec)
+    _check_key_and_spec(key, spec)
     group, expects = POLICY_KEYS[key]
     if is_import_path(spec):
         try:
@@ -231,7 +242,7 @@ def load_policy(key: str, spec: str, params, seed: int, device: Any = "cpu") -> 
                 f"callable policy ({expects})"
             )
         return policy
-    kind, content = _load_file(key, Path(spec), device)
+    kind, content = _policy_file(key, spec, device)
     if kind == "benchmarl":
         content = benchmarl_policy(key, Path(spec), device)  # a TensorDict module
     return module_policy(content, group)
