@@ -47,6 +47,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 
 from vdtn_marl import __version__
+from vdtn_marl.cli import EXIT_CONFIG_ERROR, EXIT_INTERRUPTED, INTERRUPTED_BEFORE_START
 from vdtn_marl.cli.errors import CLIError
 from vdtn_marl.cli.help import (
     COMMANDS,
@@ -64,9 +65,6 @@ from vdtn_marl.cli.prepass import (
     to_run_config,
 )
 from vdtn_marl.envs.registration import EnvSpec, list_envs, spec
-
-EXIT_CONFIG_ERROR = 2
-EXIT_INTERRUPTED = 130  # the shell's code for Ctrl-C (128 + SIGINT)
 
 # Hydra flags that take a value (the value is never the command word).
 _VALUE_FLAGS = {
@@ -471,7 +469,7 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
     )
     from vdtn_marl.io.interrupts import graceful_interrupts
 
-    before = "interrupted before the run started; nothing was written"
+    before = INTERRUPTED_BEFORE_START
     # From here Ctrl-C only sets a flag, read at safe points (vdtn_marl.io.interrupts): never inside
     # the imports and config checks below, where Python could swallow it or turn it into
     # another error.
