@@ -47,7 +47,7 @@ from typing import Any
 from hydra.experimental.callback import Callback
 
 from vdtn_marl import __version__
-from vdtn_marl.cli import EXIT_CONFIG_ERROR, EXIT_INTERRUPTED, INTERRUPTED_BEFORE_START
+from vdtn_marl.cli.codes import EXIT_CONFIG_ERROR, EXIT_INTERRUPTED, INTERRUPTED_BEFORE_START
 from vdtn_marl.cli.errors import CLIError
 from vdtn_marl.cli.help import (
     COMMANDS,

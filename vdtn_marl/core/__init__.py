@@ -10,8 +10,9 @@ does) imports neither the twin nor torch.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
+
+from vdtn_marl._lazy import lazy_exports
 
 if TYPE_CHECKING:
     from vdtn_marl.core.interval import IntervalEngine, IntervalOutcome, close_interval
@@ -37,12 +38,4 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str):
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_HOMES))
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)

@@ -6,9 +6,9 @@ config schema does) imports neither the twin nor torch.
 
 from __future__ import annotations
 
-import importlib
 from typing import TYPE_CHECKING
 
+from vdtn_marl._lazy import lazy_exports
 from vdtn_marl.errors import ConfigError
 
 if TYPE_CHECKING:
@@ -45,16 +45,12 @@ __all__ = [
 ]
 
 
+_lazy_getattr, __dir__ = lazy_exports(__name__, _HOMES)
+
+
 def __getattr__(name: str):
     if name == "CACCController":  # moved to vdtn_marl.policies; its old path warns
         from vdtn_marl.sim.cacc import CACCController
 
         return CACCController
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    return getattr(importlib.import_module(f"{__name__}.{home}"), name)
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_HOMES))
+    return _lazy_getattr(name)
