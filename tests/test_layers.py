@@ -214,17 +214,31 @@ def test_a_moved_module_is_the_new_one_at_its_old_path_and_warns(old):
     assert import_graph()[old] == {MOVED[old]}  # a shim, nothing else
 
 
-@pytest.mark.parametrize(
-    "package", ["vdtn_marl.sim", "vdtn_marl.core", "vdtn_marl.policies", "vdtn_marl.voi"]
+#: packages whose ``__init__`` gives names on first use (:func:`vdtn_marl._lazy.lazy_exports`)
+LAZY_PACKAGES = sorted(
+    ".".join(path.parent.relative_to(PACKAGE.parent).parts)
+    for path in PACKAGE.glob("**/__init__.py")
+    if "lazy_exports(" in path.read_text()
 )
+
+
+def test_the_lazy_packages_are_found():
+    assert {"vdtn_marl.sim", "vdtn_marl.core", "vdtn_marl.cli"} <= set(LAZY_PACKAGES)
+
+
+@pytest.mark.parametrize("package", LAZY_PACKAGES)
 def test_a_lazy_package_gives_every_name_it_lists(package):
     """Packages that import their modules on first use (so that their light parts read without
-    torch) list exactly the names they give, and give each from its module."""
+    torch or Hydra) list every name they give, give each lazy one from its module, and define
+    the others themselves."""
     import importlib
 
     module = importlib.import_module(package)
     homes = module._HOMES
-    assert set(module.__all__) - {"ConfigError"} == set(homes)
+    assert set(homes) <= set(module.__all__)
+    eager = set(module.__all__) - set(homes)
+    assert eager <= set(vars(module)), f"{package} lists names it does not define"
+    assert set(module.__all__) <= set(dir(module))
     for name, home in homes.items():
         assert getattr(module, name) is getattr(importlib.import_module(f"{package}.{home}"), name)
     with pytest.raises(AttributeError, match="nope"):

@@ -16,10 +16,10 @@ from collections.abc import Sequence
 from vdtn_marl._lazy import lazy_exports
 from vdtn_marl.cli.codes import EXIT_CONFIG_ERROR, EXIT_INTERRUPTED, INTERRUPTED_BEFORE_START
 
-#: the app's names, importable from here, loaded on first use
-_APP_NAMES = ("SweepSummaryHint", "bench_main", "split_command")
+#: the app's names, importable from here, loaded on first use (name → module)
+_HOMES = dict.fromkeys(("SweepSummaryHint", "bench_main", "split_command"), "app")
 
-__all__ = ["EXIT_CONFIG_ERROR", "EXIT_INTERRUPTED", "INTERRUPTED_BEFORE_START", *_APP_NAMES, "main"]
+__all__ = ["EXIT_CONFIG_ERROR", "EXIT_INTERRUPTED", "INTERRUPTED_BEFORE_START", *_HOMES, "main"]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -39,4 +39,4 @@ def main(argv: Sequence[str] | None = None) -> int:
     return app_main(argv)
 
 
-__getattr__, __dir__ = lazy_exports(__name__, dict.fromkeys(_APP_NAMES, "app"))
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)
