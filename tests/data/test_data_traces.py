@@ -80,10 +80,8 @@ def test_synthetic_numpy_and_torch_passes_agree_bit_for_bit(kwargs, num_traces):
     again = src.sample(num_traces, 1201, DT, _gen(3))
     assert torch.equal(cpu, again) and len(calls) == 1
     start, event_start, event_accel, event_steps, noise, decay, gain, dt = calls[0]
-    on_torch = original(
-        torch, *(torch.from_numpy(a) for a in (start, event_start, event_accel, event_steps, noise)),
-        decay, gain, dt,
-    )  # fmt: skip
+    drawn = (start, event_start, event_accel, event_steps, noise)
+    on_torch = original(torch, *(torch.from_numpy(a) for a in drawn), decay, gain, dt)
     assert on_torch.dtype == torch.float32
     assert torch.equal(on_torch.T, cpu)
     # events happen, so the comparison covers the plateau and band logic
