@@ -40,6 +40,7 @@ import torch
 from torch.profiler import ProfilerActivity, profile, record_function
 
 from vdtn_marl.io.files import atomic_write_json, script_command
+from vdtn_marl.reporting.benchmarking import cpu_model
 
 PHASES = ("subframes", "close", "start")
 PHASE_HELP = {
@@ -319,7 +320,7 @@ def main(argv=None) -> int:
         "torch_version": torch.__version__,
         "numpy_version": np.__version__,
         "platform": platform.platform(),
-        "cpu": platform.processor() or platform.machine(),
+        "cpu": cpu_model(),
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
         "device": args.device,
@@ -327,7 +328,7 @@ def main(argv=None) -> int:
         "device_name": (
             torch.cuda.get_device_name(torch.device(args.device))
             if args.device.startswith("cuda")
-            else platform.processor() or platform.machine()
+            else cpu_model()
         ),
         "load_average_before": list(load_before),
         "load_average_after": list(load_after),

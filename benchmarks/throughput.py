@@ -59,6 +59,7 @@ import numpy as np
 import torch
 
 from vdtn_marl.io.files import atomic_write_json, script_command
+from vdtn_marl.reporting.benchmarking import cpu_model
 
 TARGET_ENV_SUBFRAMES_PER_S = 12_000.0
 TARGET_ENV_PEER_RATIO = 2.0
@@ -584,14 +585,14 @@ def main(argv=None) -> int:
         "numpy_version": np.__version__,
         "python_version": platform.python_version(),
         "platform": platform.platform(),
-        "cpu": platform.processor() or platform.machine(),
+        "cpu": cpu_model(),
         "cpu_count": os.cpu_count(),
         "torch_threads": torch.get_num_threads(),
         "load_average_before": list(load_before),
         "load_average_after": list(load_after),
         "repeats": args.repeats,
         "devices": args.device,
-        "device_names": {"cpu": platform.processor() or platform.machine(), "cuda": cuda_names},
+        "device_names": {"cpu": cpu_model(), "cuda": cuda_names},
         "seconds_per_measurement": args.seconds,
         "traces": args.traces,
         "peer": None if peer is None else {"name": args.peer[0], "commit": peer["commit"]},

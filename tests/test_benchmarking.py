@@ -12,6 +12,7 @@ from vdtn_marl.experiment.config import RunConfig
 from vdtn_marl.reporting.benchmarking import (
     checkpoint_run,
     ci_summary,
+    cpu_model,
     parse_names,
     parse_numbers,
     parse_seeds,
@@ -48,7 +49,17 @@ def test_provenance_names_the_command_without_the_interpreter_path():
     block = provenance("demo")
     assert block["benchmark"] == "demo"
     assert block["command"].startswith("python ")
-    assert {"vdtn_marl", "torch", "written", "machine", "python"} <= block.keys()
+    assert {"vdtn_marl", "torch", "written", "machine", "cpu", "python"} <= block.keys()
+
+
+def test_cpu_model_reads_the_model_name_and_falls_back(tmp_path):
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: X\nmodel name\t: Example CPU 9000\n")
+    assert cpu_model(info) == "Example CPU 9000"
+    (tmp_path / "arm").write_text("processor\t: 0\nModel\t\t: Example Board\n")
+    assert cpu_model(tmp_path / "arm") == "Example Board"
+    fallback = cpu_model(tmp_path / "missing")  # no such file: platform's answer
+    assert fallback and fallback != "Example CPU 9000"
 
 
 def test_ci_summary_counts_only_finite_samples():

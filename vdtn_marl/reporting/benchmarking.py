@@ -9,6 +9,7 @@ from __future__ import annotations
 import datetime as dt
 import platform
 import sys
+from pathlib import Path
 
 import torch
 from rich.console import Console
@@ -55,6 +56,19 @@ def parse_numbers(flag: str, text: str, minimum: float = 0.0) -> list[float]:
     return values
 
 
+def cpu_model(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
+    """The CPU's model name (Linux's ``/proc/cpuinfo``), else what :mod:`platform` knows
+    (often only ``x86_64``): results JSONs record it, since speeds differ by machine."""
+    try:
+        for line in Path(cpuinfo).read_text(errors="replace").splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() in ("model name", "Model", "Hardware") and value.strip():
+                return value.strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
 def provenance(benchmark: str) -> dict[str, str]:
     """Who wrote a results JSON: benchmark name, the command as typed, versions, date, machine
     and the torch threads in use."""
@@ -65,6 +79,7 @@ def provenance(benchmark: str) -> dict[str, str]:
         "torch": torch.__version__,
         "written": dt.date.today().isoformat(),
         "machine": f"{platform.machine()}, {torch.get_num_threads()} torch thread(s)",
+        "cpu": cpu_model(),
         "python": sys.version.split()[0],
     }
 
