@@ -47,3 +47,22 @@ def test_the_summary_table_never_cuts_a_long_value():
     assert "…" not in text
     joined = re.sub(r"[\s│┃|]", "", text)
     assert path in joined
+
+
+def test_a_title_wider_than_the_figure_is_wrapped_not_cut(tmp_path):
+    from vdtn_marl.reporting.plots import save_figure
+
+    long = "platoon4_1mhz: mean over seeds, 95% Student-t CI, dots = runs, and more words"
+    fig, (ax, other) = plt.subplots(1, 2, figsize=(5.0, 4.2), dpi=120)
+    ax.set_title(long, fontsize=10)
+    other.set_title("short", fontsize=10)
+    save_figure(fig, tmp_path / "bars.png")
+    assert (tmp_path / "bars.png").stat().st_size > 0
+    assert "\n" in ax.title.get_text() and ax.title.get_text().replace("\n", " ") == long
+    assert other.title.get_text() == "short"
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    renderer = FigureCanvasAgg(fig).get_renderer()  # save_figure closed the figure
+    for title in (ax.title, other.title):
+        extent = title.get_window_extent(renderer)
+        assert extent.x0 >= 0 and extent.x1 <= fig.bbox.width

@@ -138,6 +138,10 @@ def save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
     import matplotlib.pyplot as plt
 
     fig.tight_layout()
+    for _ in range(3):  # wrapping a title moves the axes: check again after the new layout
+        if not _fit_titles(fig):
+            break
+        fig.tight_layout()
     if note:
         fig.subplots_adjust(bottom=fig.subplotpars.bottom + 0.04)
         fig.text(0.995, 0.005, note, ha="right", va="bottom", fontsize=7, color="0.35")
@@ -145,6 +149,40 @@ def save_figure(fig: Any, path: Path, note: str | None = None) -> Path:
     fig.savefig(buffer, format="png")
     plt.close(fig)
     return atomic_write_bytes(path, buffer.getvalue())
+
+
+def _fit_titles(fig: Any) -> bool:
+    """Wrap each axes title that is wider than the figure leaves it (titles are centred over
+    their axes) onto more lines, so that no title is cut at the figure's edge. Returns whether
+    a title changed."""
+    import textwrap
+
+    if not hasattr(fig.canvas, "get_renderer"):  # a closed figure, or a canvas without one
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        FigureCanvasAgg(fig)
+    renderer = fig.canvas.get_renderer()
+    width = fig.bbox.width
+    changed = False
+    for ax in fig.axes:
+        title = ax.title
+        text = title.get_text()
+        if not text or not title.get_visible():
+            continue
+        extent = title.get_window_extent(renderer)
+        centre = (extent.x0 + extent.x1) / 2.0
+        room = 2.0 * min(centre, width - centre) - 8.0  # pixels, a small margin each side
+        if extent.width <= room:
+            continue
+        longest = max(len(line) for line in text.splitlines())
+        chars = max(12, int(0.95 * longest * room / extent.width))
+        lines = text.splitlines()
+        wrapped = "\n".join(textwrap.fill(line, chars) for line in lines)
+        if wrapped == text:  # a single word longer than the room: nothing more to do
+            continue
+        title.set_text(wrapped)
+        changed = True
+    return changed
 
 
 def pyplot_agg():
