@@ -53,3 +53,20 @@ def test_composing_a_default_run_config_imports_no_torch():
         "print('torch' in sys.modules)\n"
     )
     assert _fresh(code) == "False"
+
+
+def test_composing_from_python_shows_no_hydra_schema_warning():
+    """Hydra warns that our launcher configs share their schemas' names on every composition;
+    nothing for a user to act on, so composing from Python (benchmarks, notebooks) is quiet,
+    as the command line is."""
+    code = (
+        "import warnings\n"
+        "warnings.simplefilter('always')\n"
+        "from vdtn_marl.experiment import compose\n"
+        "with warnings.catch_warnings(record=True) as seen:\n"
+        "    warnings.simplefilter('always')\n"
+        "    with compose.hydra_compose():\n"
+        "        compose.compose_config('config', ['experiment=smoke'])\n"
+        "print(sum('ConfigStore schema' in str(w.message) for w in seen))\n"
+    )
+    assert _fresh(code) == "0"

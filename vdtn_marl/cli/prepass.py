@@ -20,6 +20,7 @@ from vdtn_marl.cli.errors import CLIError, translate
 from vdtn_marl.cli.help import EVAL_FRESH_KEYS, group_options, read_conf_yaml
 from vdtn_marl.experiment.compose import (
     CONFIG_PACKAGE,
+    SCHEMA_WARNING,
     checkpoint_file,
     checkpoint_problem,
     compose_config,
@@ -29,7 +30,6 @@ from vdtn_marl.experiment.compose import (
 
 # Commands whose config is composed by Hydra, and the primary config of each.
 HYDRA_COMMANDS = {"train": "config", "jocc": "config", "eval": "config", "bench": "bench"}
-SCHEMA_WARNING = "(?s).*is validated against ConfigStore schema with the same name"
 
 
 def _job_overrides(overrides: list[str], multirun: bool) -> list[list[str]]:

@@ -20,6 +20,11 @@ from typing import Any
 #: The package holding the Hydra configs (``vdtn_marl/conf``).
 CONFIG_PACKAGE = "vdtn_marl.conf"
 
+#: Hydra's warning about our ``conf/hydra/launcher/*.yaml``, which carry the names of the
+#: launchers' own schemas: Hydra checks them against those schemas and warns on every
+#: composition. Nothing for a user to act on, so it is not shown.
+SCHEMA_WARNING = "(?s).*is validated against ConfigStore schema with the same name"
+
 
 @contextlib.contextmanager
 def hydra_compose() -> Iterator[None]:
@@ -38,9 +43,13 @@ def hydra_compose() -> Iterator[None]:
 
 
 def compose_config(config_name: str, overrides: list[str]) -> Any:
+    import warnings
+
     from hydra import compose
 
-    return compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=SCHEMA_WARNING, category=UserWarning)
+        return compose(config_name=config_name, overrides=overrides, return_hydra_config=True)
 
 
 def job_config(cfg: Any) -> dict:
