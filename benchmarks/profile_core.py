@@ -68,8 +68,17 @@ def parse_args(argv=None) -> argparse.Namespace:
         default="normal",
         help="the twin's fast-fading draws (DigitalTwin fading_draws)",
     )
-    p.add_argument("--out", type=Path, default=Path("benchmarks/results/profile_core.json"))
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        help="results JSON (default benchmarks/results/profile_core.json, or "
+        "profile_core_exponential.json with --fading-draws exponential)",
+    )
     args = p.parse_args(argv)
+    if args.out is None:
+        suffix = "" if args.fading_draws == "normal" else f"_{args.fading_draws}"
+        args.out = Path(f"benchmarks/results/profile_core{suffix}.json")
     if any(b < 1 for b in args.batch_sizes):
         p.error(f"--batch-sizes {args.batch_sizes} must all be >= 1")
     if args.intervals < 0:

@@ -123,3 +123,11 @@ def test_profile_attributes_the_fading_draws_to_the_interval_start(tmp_path, cap
     with pytest.raises(SystemExit):
         module.main(["--batch-sizes", "0"])
     assert "--batch-sizes" in capsys.readouterr().err
+
+
+def test_profile_writes_each_fading_law_to_its_own_file_by_default():
+    module = _profile_module()
+    assert module.parse_args([]).out.name == "profile_core.json"
+    exponential = module.parse_args(["--fading-draws", "exponential"])
+    assert exponential.out.name == "profile_core_exponential.json"
+    assert module.parse_args(["--out", "x.json"]).out.name == "x.json"
