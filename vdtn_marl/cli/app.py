@@ -58,13 +58,13 @@ from vdtn_marl.cli.help import (
 )
 from vdtn_marl.cli.prepass import (
     HYDRA_COMMANDS,
-    SCHEMA_WARNING,
     eval_overrides,
     job_config,
     prevalidate,
     to_run_config,
 )
 from vdtn_marl.envs.registration import EnvSpec, list_envs, spec
+from vdtn_marl.experiment.compose import SCHEMA_WARNING
 
 # Hydra flags that take a value (the value is never the command word).
 _VALUE_FLAGS = {

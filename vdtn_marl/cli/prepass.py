@@ -11,7 +11,6 @@ or checks a benchmark (:func:`validate_bench`), and checks that the job's folder
 import argparse
 import importlib
 import importlib.util
-import warnings
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -20,7 +19,6 @@ from vdtn_marl.cli.errors import CLIError, translate
 from vdtn_marl.cli.help import EVAL_FRESH_KEYS, group_options, read_conf_yaml
 from vdtn_marl.experiment.compose import (
     CONFIG_PACKAGE,
-    SCHEMA_WARNING,
     checkpoint_file,
     checkpoint_problem,
     compose_config,
@@ -327,7 +325,6 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
     from vdtn_marl.experiment.config import register_configs
 
     config_name = HYDRA_COMMANDS[command]
-    warnings.filterwarnings("ignore", message=SCHEMA_WARNING, category=UserWarning)
     register_configs()
     with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
         try:

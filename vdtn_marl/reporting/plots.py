@@ -174,9 +174,8 @@ def _fit_titles(fig: Any) -> bool:
         room = 2.0 * min(centre, width - centre) - 8.0  # pixels, a small margin each side
         if extent.width <= room:
             continue
-        longest = max(len(line) for line in text.splitlines())
-        chars = max(12, int(0.95 * longest * room / extent.width))
         lines = text.splitlines()
+        chars = max(12, int(0.95 * max(map(len, lines)) * room / extent.width))
         wrapped = "\n".join(textwrap.fill(line, chars) for line in lines)
         if wrapped == text:  # a single word longer than the room: nothing more to do
             continue
