@@ -1,11 +1,15 @@
-"""Paired learning check of a change of ``experiment=paper``'s vehicle batch shape.
+"""Paired learning check of a change of ``experiment=paper``'s vehicle batch shape (or of
+another setting, ``--new-overrides``).
 
     python benchmarks/paper_batch_pairing.py     # writes results/paper_batch_pairing.json
     python benchmarks/paper_batch_pairing.py --stages pi_star --seeds 0 --iterations 4 \
         --eval-every 2 --out /tmp/pairing.json                # a quick look
+    python benchmarks/paper_batch_pairing.py --old 256x100 --new 256x100 \
+        --new-overrides algo.activation=tanh_sigmoid --out results/paper_activation_pairing.json
 
 Two arms share everything but ``algo.num_envs`` × ``algo.rollout_steps`` (the samples per PPO
-iteration are equal, so iterations compare at equal frames): ``--old`` (the earlier
+iteration are equal, so iterations compare at equal frames) and the Hydra overrides of
+``--old-overrides`` / ``--new-overrides`` (none by default): ``--old`` (the earlier
 ``experiment=paper`` shape, 64 scenarios × 400 intervals: whole 20 s episodes) and ``--new``
 (more scenarios, shorter rollouts; the environments persist across iterations, so episodes
 run on over several batches and GAE bootstraps at the batch end). For every seed, both arms
@@ -47,6 +51,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--seeds", default="0,1,2", help="run seeds (one pair each)")
     p.add_argument("--old", default="64x400", help="scenarios x rollout intervals of the old arm")
     p.add_argument("--new", default="256x100", help="scenarios x rollout intervals of the new arm")
+    p.add_argument("--old-overrides", default="", help="Hydra overrides of the old arm")
+    p.add_argument("--new-overrides", default="", help="Hydra overrides of the new arm")
     p.add_argument("--iterations", type=int, default=30, help="PPO iterations per arm")
     p.add_argument("--eval-every", type=int, default=10, help="iterations between evaluations")
     p.add_argument("--eval-episodes", type=int, default=64, help="held-out scenarios")
@@ -62,6 +68,11 @@ def parse_args(argv=None) -> argparse.Namespace:
         if not (envs.isdigit() and steps.isdigit() and int(envs) > 0 and int(steps) > 0):
             p.error(f"--{flag} {text!r} must look like 64x400 (scenarios x intervals, both >= 1)")
         setattr(args, flag, (int(envs), int(steps)))
+    for flag in ("old_overrides", "new_overrides"):
+        overrides = getattr(args, flag).split()
+        if any("=" not in item for item in overrides):
+            p.error(f"--{flag.replace('_', '-')} {getattr(args, flag)!r} must be key=value items")
+        setattr(args, flag, overrides)
     if args.old[0] * args.old[1] != args.new[0] * args.new[1]:
         p.error(f"--old {args.old} and --new {args.new} must have equal samples per iteration")
     if args.iterations < 1 or not 1 <= args.eval_every <= args.iterations:
@@ -71,7 +82,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-def _loop(seed: int, shape: tuple[int, int]):
+def _loop(seed: int, shape: tuple[int, int], extra: list[str] = ()):
     from vdtn_marl.experiment.compose import (
         compose_config,
         hydra_compose,
@@ -87,6 +98,7 @@ def _loop(seed: int, shape: tuple[int, int]):
         f"seed={seed}",
         f"algo.num_envs={shape[0]}",
         f"algo.rollout_steps={shape[1]}",
+        *extra,
     ]
     with hydra_compose():
         cfg = to_run_config(job_config(compose_config("config", overrides)))
@@ -94,12 +106,13 @@ def _loop(seed: int, shape: tuple[int, int]):
     return JointOptimisation(cfg, tempfile.mkdtemp(prefix="paper_batch_pairing_"))
 
 
-def run_arm(stage: str, seed: int, shape: tuple[int, int], args) -> dict:
-    """Train one arm and score it every ``--eval-every`` iterations."""
+def run_arm(stage: str, seed: int, shape: tuple[int, int], args, extra=()) -> dict:
+    """Train one arm (``extra``: its Hydra overrides) and score it every ``--eval-every``
+    iterations."""
     from vdtn_marl.algos.evaluate import evaluate_system
     from vdtn_marl.algos.ppo import ActorPolicy
 
-    loop = _loop(seed, shape)
+    loop = _loop(seed, shape, list(extra))
     trainer = loop.pi_star if stage == "pi_star" else loop.pi_tilde
     intervals = loop.params.episode_intervals
 
@@ -200,6 +213,8 @@ def main(argv=None) -> int:
                 "load_average_end": os.getloadavg(),
                 "old": args.old,
                 "new": args.new,
+                "old_overrides": args.old_overrides,
+                "new_overrides": args.new_overrides,
                 "iterations": args.iterations,
                 "eval_every": args.eval_every,
                 "eval_episodes": args.eval_episodes,
@@ -213,13 +228,13 @@ def main(argv=None) -> int:
     for stage in args.stages:
         for seed in args.seeds:
             for arm in ("old", "new"):
-                shape = getattr(args, arm)
-                run = {**run_arm(stage, seed, shape, args), "arm": arm}
+                shape, extra = getattr(args, arm), getattr(args, f"{arm}_overrides")
+                run = {**run_arm(stage, seed, shape, args, extra), "arm": arm, "overrides": extra}
                 runs.append(run)
                 write([row for s in args.stages for row in pair_rows(runs, s)])  # so far
                 last = run["evaluations"][-1]
                 print(
-                    f"{stage:<8} seed {seed} {arm} {shape[0]}x{shape[1]}: cost "
+                    f"{stage:<8} seed {seed} {arm} {shape[0]}x{shape[1]} {' '.join(extra)}: cost "
                     f"{run['evaluations'][0]['control_cost']:.4f} -> {last['control_cost']:.4f}, "
                     f"{run['cpu_s_per_iteration']:.2f} CPU s/iteration "
                     f"(load {run['load_average_1min_end']:.2f})",

@@ -191,6 +191,7 @@ BAD_CONFIGS = [
     (["experiment.eval_episodes=0"], "experiment.eval_episodes=0"),
     (["algo.num_envs=0"], "algo.num_envs=0"),
     (["algo.lr_schedule=cosine"], "algo.lr_schedule='cosine'"),
+    (["algo.activation=relu"], "algo.activation='relu'"),
     (["algo.validate_every=-1"], "algo.validate_every=-1"),
     (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
     (["algo.rra_burn_in_intervals=200"], "algo.rra_burn_in_intervals=200"),

@@ -1,7 +1,7 @@
-"""The arithmetic of the training-throughput benchmarks (stage_throughput.py and
-paper_batch_pairing.py): ratios in the same repeat, the size choice, the iteration estimate,
-the paired differences and the refusal of bad arguments. The timed runs themselves are
-benchmarks, never tests."""
+"""The arithmetic of the training-throughput benchmarks (stage_throughput.py,
+paper_batch_pairing.py and activation_cost.py): ratios in the same repeat, the size choice,
+the iteration estimate, the paired differences and the refusal of bad arguments. The timed
+runs themselves are benchmarks, never tests."""
 
 from __future__ import annotations
 
@@ -22,6 +22,7 @@ def _script(name: str):
 
 stages = _script("stage_throughput.py")
 pairing = _script("paper_batch_pairing.py")
+activation = _script("activation_cost.py")
 
 
 def _run(stage, batch, repeat, seconds, cpu_seconds, frames=25_600):
@@ -117,6 +118,7 @@ def test_stage_throughput_refuses_bad_arguments(argv, flag, capsys):
         (["--new", "256x50"], "--new"),  # fewer samples per iteration than the old arm
         (["--old", "64"], "--old"),
         (["--eval-every", "0"], "--eval-every"),
+        (["--new-overrides", "algo.activation"], "--new-overrides"),  # not key=value
     ],
 )
 def test_pairing_refuses_bad_arguments(argv, flag, capsys):
@@ -201,3 +203,32 @@ def test_paper_stage_timings_refuses_bad_arguments(tmp_path, capsys):
     with pytest.raises(SystemExit):
         timings.parse_args([f"new={tmp_path / 'run'}", "--cpu-share", "new=300/100"])
     assert "--cpu-share" in capsys.readouterr().err
+
+
+def test_pairing_arms_take_their_own_overrides():
+    args = pairing.parse_args(
+        ["--old", "256x100", "--new", "256x100", "--new-overrides", "algo.activation=tanh_sigmoid"]
+    )
+    assert args.old_overrides == [] and args.new_overrides == ["algo.activation=tanh_sigmoid"]
+
+
+def test_activation_ratios_are_tanhs_time_over_the_others_in_the_same_repeat():
+    runs = [
+        {"part": "k", "name": "tanh", "repeat": 0, "us": 100.0},
+        {"part": "k", "name": "tanh_sigmoid", "repeat": 0, "us": 25.0},
+        {"part": "k", "name": "tanh", "repeat": 1, "us": 300.0},  # a slow repeat for both
+        {"part": "k", "name": "tanh_sigmoid", "repeat": 1, "us": 100.0},
+        {"part": "k", "name": "tanh", "repeat": 2, "us": 120.0},
+        {"part": "k", "name": "tanh_sigmoid", "repeat": 2, "us": 60.0},
+    ]
+    rows = {r["name"]: r for r in activation._ratio_rows(runs, "us")}
+    assert rows["tanh"]["tanh_over_this"] == 1.0
+    assert rows["tanh_sigmoid"]["tanh_over_this"] == 3.0  # median of 4, 3, 2
+    assert rows["tanh_sigmoid"]["us"] == 60.0 and rows["tanh_sigmoid"]["runs"] == 3
+
+
+def test_activation_cost_refuses_bad_arguments(capsys):
+    with pytest.raises(SystemExit) as refused:
+        activation.parse_args(["--stages", "pi_star,warp"])
+    assert "--stages" in capsys.readouterr().err + str(refused.value.code)
+    assert activation.parse_args(["--stages", "none"]).stages == []

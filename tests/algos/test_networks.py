@@ -7,7 +7,15 @@ import torch
 from tensordict import TensorDict
 from torchrl.data import Bounded, Categorical, Composite
 
-from vdtn_marl.algos.networks import CategoricalMode, ObservationScaler, make_actor, make_critic
+from vdtn_marl.algos.networks import (
+    ACTIVATION_CLASSES,
+    CategoricalMode,
+    ObservationScaler,
+    SigmoidTanh,
+    make_actor,
+    make_critic,
+)
+from vdtn_marl.algos.params import ACTIVATIONS
 from vdtn_marl.algos.ppo import ActorPolicy
 
 N_AGENTS, N_OBS = 3, 4
@@ -77,7 +85,7 @@ def test_observation_scaler_standardises_and_masks():
 N_ACTIONS = 6
 
 
-def _discrete_actor(share_params: bool = True):
+def _discrete_actor(share_params: bool = True, activation: str = "tanh"):
     actions = Composite(
         {
             "agents": Composite(
@@ -85,16 +93,20 @@ def _discrete_actor(share_params: bool = True):
             )
         }
     )
-    return make_actor(_spec(), actions, "agents", share_params=share_params)
+    return make_actor(_spec(), actions, "agents", share_params=share_params, activation=activation)
 
 
+@pytest.mark.parametrize("activation", ACTIVATIONS)
 @pytest.mark.parametrize("scale", [0.1, 1.0, 30.0])
-def test_fast_categorical_mode_gives_the_actors_own_deterministic_actions(scale):
+def test_fast_categorical_mode_gives_the_actors_own_deterministic_actions(scale, activation):
     """The RRA policy's fast path returns, bit for bit, what the ProbabilisticActor does under
     InteractionType.DETERMINISTIC (the slow path, ``ActorPolicy.action``), also where the
-    logits are far apart (large scale) and where several are tied (zero last layer)."""
+    logits are far apart (large scale) and where several are tied (zero last layer), with
+    every activation of ``algo.activation``."""
     torch.manual_seed(1)
-    actor = _discrete_actor()
+    actor = _discrete_actor(activation=activation)
+    hidden = [m for m in actor.modules() if isinstance(m, ACTIVATION_CLASSES[activation])]
+    assert hidden  # the network is built with the activation asked for
     policy = ActorPolicy(actor, "agents")
     assert policy.mode is not None
     observation = (torch.rand(4096, N_AGENTS, N_OBS) * 2 - 1) * scale
@@ -135,3 +147,23 @@ def test_fast_categorical_mode_only_for_shared_discrete_actors():
     assert ActorPolicy(_discrete_actor(), "agents", deterministic=False).mode is None
     with pytest.raises((RuntimeError, ValueError)):
         ActorPolicy(_discrete_actor(), "agents")(torch.zeros(2, N_AGENTS + 1, N_OBS))
+
+
+def test_every_activation_name_has_a_module_class():
+    """``algo.activation``'s allowed names (validated by the config) and the classes the
+    networks build are one list."""
+    assert tuple(ACTIVATION_CLASSES) == ACTIVATIONS
+    with pytest.raises(ValueError, match="activation"):
+        _discrete_actor(activation="relu")
+
+
+def test_sigmoid_tanh_is_tanh_to_float32_rounding():
+    """2·sigmoid(2x) − 1 is tanh(x): within a few 1e-7 of the float64 tanh everywhere, exact
+    at 0 and in saturation; its gradient is tanh's (1 − tanh²) to the same precision."""
+    x = torch.linspace(-20.0, 20.0, 200_001, dtype=torch.float32, requires_grad=True)
+    y = SigmoidTanh()(x)
+    exact = torch.tanh(x.detach().double())
+    assert (y.detach().double() - exact).abs().max() < 3e-7
+    assert SigmoidTanh()(torch.tensor([0.0, 30.0, -30.0])).tolist() == [0.0, 1.0, -1.0]
+    y.sum().backward()
+    assert (x.grad.double() - (1 - exact**2)).abs().max() < 1e-6

@@ -5,6 +5,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+#: values of ``algo.activation``, the hidden layers' activation of every actor and critic
+#: (:data:`vdtn_marl.algos.networks.ACTIVATION_CLASSES` builds them): ``tanh`` is torch.tanh;
+#: ``tanh_sigmoid`` is the same function computed as 2·sigmoid(2x) − 1, from torch's sigmoid
+#: kernel, several times faster than its tanh kernel on the CPUs measured
+#: (benchmarks/activation_cost.py); it differs from torch.tanh by at most a few 1e-7
+#: (absolute), so results differ in the last bits
+ACTIVATIONS = ("tanh", "tanh_sigmoid")
+
 
 @dataclass
 class AlgoConfig:
@@ -14,6 +22,7 @@ class AlgoConfig:
     share_params: bool = True  # one network for every agent of a group
     depth: int = 2  # hidden layers
     num_cells: int = 64  # units per hidden layer
+    activation: str = "tanh"  # hidden layers: tanh or tanh_sigmoid (ACTIVATIONS above)
     lr: float = 3e-4
     lr_schedule: str = "constant"  # linear: decays to 0 over each training stage
     gamma: float = 0.99  # vehicles: discount per control interval (horizon ≈ 5 s)

@@ -141,6 +141,7 @@ class PPOTrainer:
             prior=prior,
             initial_log_scale=algo.initial_log_scale,
             device=self.device,
+            activation=algo.activation,
         )
         self.critic = make_critic(
             obs_spec,
@@ -150,6 +151,7 @@ class PPOTrainer:
             depth=algo.depth,
             num_cells=algo.num_cells,
             device=self.device,
+            activation=algo.activation,
         )
         self.loss = ClipPPOLoss(
             actor_network=self.actor,

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
-from vdtn_marl.algos.params import AlgoConfig
+from vdtn_marl.algos.params import ACTIVATIONS, AlgoConfig
 from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
@@ -319,6 +319,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("algo.lmbda", a.lmbda, 0.0, 1.0)
     _real("algo.rra_lmbda", a.rra_lmbda, 0.0, 1.0)
     _choice("algo.rra_credit", a.rra_credit, RRA_CREDITS)
+    _choice("algo.activation", a.activation, ACTIVATIONS)
     for key in ("rra_mask_silent", "persistent_envs"):
         if not isinstance(getattr(a, key), bool):
             raise ConfigError(f"algo.{key}={getattr(a, key)!r} must be true or false")
