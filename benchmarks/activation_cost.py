@@ -15,10 +15,12 @@ times), timed in process CPU seconds with torch on one thread:
 2. **RRA policy call**: the learned RRA policy's fast path (``ActorPolicy``, one call per 1 ms
    subframe) at B = 256 scenarios, built as ``vdtn-marl jocc experiment=smoke`` builds it with
    each activation.
-3. **Training stages** (``--stages``, default ``pi_star,pi_tilde_learned,rra``): one PPO
-   iteration of each stage at ``experiment=paper``'s batch sizes, in a fresh process per cell
-   (``benchmarks/stage_throughput.py``'s cell), and the three stages' sum at the paper's budgets
-   (500 π*, 500 π̃ and 300 RRA iterations: the training part of a later JOCC iteration).
+3. **Training stages** (``--stages``, default ``pi_star,pi_tilde_learned,rra``): PPO
+   iterations of each stage at ``experiment=paper``'s batch sizes, one loop per activation in
+   this process, alternating between them iteration by iteration (``--iterations`` per repeat;
+   ``pi_tilde_learned``: the RRA actor picks every subframe's actions), and the three stages'
+   sum at the paper's budgets (500 π*, 500 π̃ and 300 RRA iterations: the training part of a
+   later JOCC iteration).
 
 The table gives medians and, per row, the median over repeats of tanh's time divided by the
 activation's (> 1: faster than tanh). The two activations differ in the last bits, so they give
@@ -45,7 +47,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--repeats", type=int, default=5, help="interleaved runs of every row")
     p.add_argument("--calls", type=int, default=300, help="calls per kernel or policy timing")
     p.add_argument("--stages", default=",".join(STAGES), help=f"some of {STAGES}, or none")
-    p.add_argument("--iterations", type=int, default=2, help="timed PPO iterations per stage")
+    p.add_argument("--iterations", type=int, default=2, help="PPO iterations per repeat")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     from vdtn_marl.reporting.benchmarking import parse_names
@@ -111,6 +113,70 @@ def _ratio_rows(runs: list[dict], key: str, reference: str = "tanh") -> list[dic
     return rows
 
 
+def _paper_loop(activation: str):
+    from vdtn_marl.experiment.compose import (
+        compose_config,
+        hydra_compose,
+        job_config,
+        to_run_config,
+    )
+    from vdtn_marl.experiment.jocc import JointOptimisation
+
+    overrides = ["experiment=paper", "threads=1", f"algo.activation={activation}"]
+    with hydra_compose():
+        cfg = to_run_config(job_config(compose_config("config", overrides)))
+    cfg.progress = False
+    return JointOptimisation(cfg, tempfile.mkdtemp(prefix="activation_cost_"))
+
+
+def _time_stages(args, activations) -> tuple[list[dict], dict]:
+    """Per stage: one ``experiment=paper`` loop per activation in this process, each fitted and
+    warmed up (one PPO iteration), then ``--repeats`` × ``--iterations`` PPO iterations timed
+    in CPU seconds, alternating between the activations iteration by iteration (so both see
+    the same machine)."""
+    budgets = {}
+    runs = []
+    for stage in args.stages:
+        trainers = {}
+        for activation in activations:
+            loop = _paper_loop(activation)
+            budgets = {
+                "control_iterations": loop.cfg.experiment.control_iterations,
+                "rra_iterations": loop.cfg.experiment.rra_iterations,
+            }
+            trainer = {"pi_star": loop.pi_star, "rra": loop.rra}.get(stage, loop.pi_tilde)
+            if stage == "pi_tilde_learned":  # the RRA actor acts, as after a first RRA stage
+                loop.rra.fit_observation_scaling()
+                loop.rra.iteration = 1
+                loop.rra_slot.policy = loop.rra_policy()
+            trainer.fit_observation_scaling()
+            trainer.train_iteration()  # warm-up
+            trainers[activation] = trainer
+        for repeat in range(args.repeats):
+            for index in range(args.iterations):
+                for activation, trainer in trainers.items():
+                    began = time.process_time()
+                    trainer.train_iteration()
+                    runs.append(
+                        {
+                            "part": stage,
+                            "name": activation,
+                            # the pair: this iteration of every activation, back to back
+                            "repeat": repeat * args.iterations + index,
+                            "cpu_s": time.process_time() - began,
+                        }
+                    )
+            shown = {r["name"]: r["cpu_s"] for r in runs if r["part"] == stage}
+            print(
+                f"[{repeat}] {stage:<17} "
+                + "  ".join(f"{a} {shown[a]:.2f}" for a in activations)
+                + " CPU s/iteration",
+                flush=True,
+            )
+        del trainers
+    return runs, budgets
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
     import numpy as np
@@ -154,37 +220,9 @@ def main(argv=None) -> int:
             f"{row['tanh_over_this']:>9.2f}"
         )
 
-    stage_runs, stage_rows, budgets = [], [], {}
+    stage_runs, stage_rows, budgets, training_min = [], [], {}, {}
     if args.stages:
-        import stage_throughput  # the cell runner of benchmarks/stage_throughput.py
-
-        budgets = stage_throughput._budgets()
-        for repeat in range(args.repeats):
-            for stage in args.stages:
-                for activation in ACTIVATIONS:
-                    cell = {
-                        "stage": stage,
-                        "batch": None,  # experiment=paper's own sizes
-                        "iterations": args.iterations,
-                        "overrides": [f"algo.activation={activation}"],
-                    }
-                    result = stage_throughput.spawn(cell)
-                    stage_runs.append(
-                        {
-                            "part": stage,
-                            "name": activation,
-                            "repeat": repeat,
-                            "cpu_s": result["cpu_seconds_per_iteration"],
-                            "update_cpu_s": statistics.median(result["update_cpu_s"]),
-                            "frames_per_iteration": result["frames_per_iteration"],
-                            "load_average_1min_before": result["load_average_1min_before"],
-                        }
-                    )
-                    print(
-                        f"[{repeat}] {stage:<17} {activation:<13} "
-                        f"{result['cpu_seconds_per_iteration']:.2f} CPU s/iteration",
-                        flush=True,
-                    )
+        stage_runs, budgets = _time_stages(args, ACTIVATIONS)
         stage_rows = _ratio_rows(stage_runs, "cpu_s")
         iterations = {
             "pi_star": budgets["control_iterations"],
@@ -197,7 +235,6 @@ def main(argv=None) -> int:
                 f"{row['part']:<17} {row['name']:<13} {row['cpu_s']:>10.2f} "
                 f"{row['tanh_over_this']:>9.2f}"
             )
-        training_min = {}
         for activation in ACTIVATIONS:
             mine = {r["part"]: r["cpu_s"] for r in stage_rows if r["name"] == activation}
             if set(mine) == set(iterations):
@@ -220,7 +257,7 @@ def main(argv=None) -> int:
             "rra_policy_call": policy_rows,
             "stages": stage_rows,
             "paper_budgets": budgets,
-            "training_cpu_min_later_iteration": training_min if args.stages else {},
+            "training_cpu_min_later_iteration": training_min,
             "runs": {"kernels": kernel_runs, "rra_policy_call": policy_runs, "stages": stage_runs},
         },
     )

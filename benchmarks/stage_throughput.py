@@ -128,11 +128,11 @@ def _learned_rra(loop) -> None:
 def run_cell(cell: dict) -> dict:
     """Time one stage at one batch size in this process (see the module doc)."""
     stage, batch, iterations = cell["stage"], cell.get("batch"), cell["iterations"]
-    overrides = list(cell.get("overrides", []))  # a caller's own (benchmarks/activation_cost.py)
-    if stage in CONTROL_STAGES and batch is not None:
-        overrides += [f"algo.num_envs={batch}", f"algo.rollout_steps={CONTROL_FRAMES // batch}"]
-    elif stage == "rra" and batch is not None:
-        overrides += [f"algo.rra_num_envs={batch}", f"algo.rra_rollout_steps={RRA_FRAMES // batch}"]
+    overrides = []
+    if stage in CONTROL_STAGES:
+        overrides = [f"algo.num_envs={batch}", f"algo.rollout_steps={CONTROL_FRAMES // batch}"]
+    elif stage == "rra":
+        overrides = [f"algo.rra_num_envs={batch}", f"algo.rra_rollout_steps={RRA_FRAMES // batch}"]
     load_before = os.getloadavg()[0]
     began = time.perf_counter()
     cfg, loop = _loop(overrides)
