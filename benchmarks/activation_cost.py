@@ -182,7 +182,7 @@ def main(argv=None) -> int:
     import numpy as np
     import torch
 
-    from vdtn_marl.algos.networks import SigmoidTanh
+    from vdtn_marl.algos.networks import ACTIVATION_CLASSES
     from vdtn_marl.algos.params import ACTIVATIONS
     from vdtn_marl.io.files import atomic_write_json
     from vdtn_marl.reporting.benchmarking import provenance
@@ -191,7 +191,7 @@ def main(argv=None) -> int:
     load_start = os.getloadavg()
     generator = torch.Generator().manual_seed(0)
     data = {part: torch.randn(rows, CELLS, generator=generator) * 2 for part, rows in ROWS.items()}
-    kernels = {"tanh": torch.tanh, "tanh_sigmoid": SigmoidTanh.function}
+    kernels = {name: ACTIVATION_CLASSES[name].function for name in ACTIVATIONS}
     policies = {a: _rra_policy(a) for a in ACTIVATIONS}
     links, features = policies["tanh"].mode.n_agents, policies["tanh"].mode.scaler.center.numel()
     observation = torch.randn(256, links, features, generator=generator)

@@ -10,8 +10,9 @@
   centralised critic has one output per agent (:class:`OwnValue`) rather than one value that
   TorchRL would copy to every agent.
 ``share_params`` makes one network serve every agent of the group. The hidden layers' activation
-is tanh: ``nn.Tanh`` (``activation="tanh"``) or :class:`SigmoidTanh` (``"tanh_sigmoid"``, the
-same function from torch's sigmoid kernel, faster on CPUs: :data:`ACTIVATION_CLASSES`).
+is tanh: :class:`Tanh` (``nn.Tanh``, ``activation="tanh"``) or :class:`SigmoidTanh`
+(``"tanh_sigmoid"``, the same function from torch's sigmoid kernel, faster on CPUs;
+:data:`ACTIVATION_CLASSES`).
 
 Observations are standardised inside the networks (:class:`ObservationScaler`): first with the
 bounds of the environment's observation spec, then, once :meth:`ObservationScaler.fit_` has
@@ -41,6 +42,13 @@ from torchrl.data import Categorical as CategoricalSpec
 from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
 
 
+class Tanh(nn.Tanh):
+    """``nn.Tanh`` that names its function (:attr:`function`, which the fast path of
+    :class:`CategoricalMode` calls directly)."""
+
+    function = staticmethod(torch.tanh)
+
+
 class SigmoidTanh(nn.Module):
     """tanh(x) computed as 2·sigmoid(2x) − 1 (the identity is exact; the float32 results
     differ from ``torch.tanh``'s by at most a few 1e-7). On the CPUs measured, torch's sigmoid
@@ -56,13 +64,9 @@ class SigmoidTanh(nn.Module):
 
 
 #: ``algo.activation`` → the hidden layers' module class (the names are
-#: :data:`vdtn_marl.algos.params.ACTIVATIONS`)
-ACTIVATION_CLASSES: dict[str, type[nn.Module]] = {"tanh": nn.Tanh, "tanh_sigmoid": SigmoidTanh}
-#: each activation class → the function its forward applies (the fast path calls it directly)
-_ACTIVATION_FUNCTIONS: dict[type[nn.Module], Callable[[torch.Tensor], torch.Tensor]] = {
-    nn.Tanh: torch.tanh,
-    SigmoidTanh: SigmoidTanh.function,
-}
+#: :data:`vdtn_marl.algos.params.ACTIVATIONS`); each class's ``function`` is what its
+#: forward applies
+ACTIVATION_CLASSES: dict[str, type[nn.Module]] = {"tanh": Tanh, "tanh_sigmoid": SigmoidTanh}
 
 
 def activation_class(name: str) -> type[nn.Module]:
@@ -299,13 +303,13 @@ class CategoricalMode:
         self.body = body
         self.n_agents = int(body.n_agents)
         self.layers = list(body._empty_net)
-        kinds = (nn.Linear, *_ACTIVATION_FUNCTIONS)
+        kinds = (nn.Linear, *ACTIVATION_CLASSES.values())
         if not all(type(layer) in kinds for layer in self.layers):
             raise TypeError(
                 f"CategoricalMode expects Linear and activation layers, got {self.layers}"
             )
         # per layer: None for a Linear layer, else the activation's function
-        self._functions = [_ACTIVATION_FUNCTIONS.get(type(layer)) for layer in self.layers]
+        self._functions = [getattr(layer, "function", None) for layer in self.layers]
 
     @classmethod
     def of(cls, actor) -> CategoricalMode | None:
