@@ -166,6 +166,11 @@ class IntervalIntegrator:
         self._phi_t_np = self.phi_t.cpu().numpy()
         self._input_gain_np = self.input_gain.cpu().numpy()
 
+    def numpy_matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Φ^T [3, 3], the input gains G_n [T+1, 3]) as the float32 NumPy arrays that
+        :meth:`integrate` uses on NumPy states."""
+        return self._phi_t_np, self._input_gain_np
+
     def integrate(
         self,
         state: PlatoonState,

@@ -132,6 +132,11 @@ class Topology:
         return tuple(order[m % len(order)] for m in range(num_subchannels))
 
     # ------------------------------------------------------------------ rows of arrays
+    def row_indices(self) -> _Rows:
+        """The index objects of the methods below (slices where rows are contiguous, else
+        int64 arrays), for code that indexes NumPy arrays in a tight loop."""
+        return _rows(self)
+
     def followers_of(self, x: Array) -> Array:
         """``x[:, followers]``: [B, N, ...] → [B, F, ...]."""
         return x[:, _index(_rows(self).follower_index, x)]
