@@ -108,12 +108,16 @@ def symmetric_normal(
     sum would have variance 2 there). ``numpy=True``: the same draws and numbers as a NumPy
     array (CPU generator).
     """
-    x = torch.randn(shape, generator=generator, device=generator.device)
+    return symmetrize(torch.randn(shape, generator=generator, device=generator.device), numpy)
+
+
+def symmetrize(x: torch.Tensor, numpy: bool = False) -> torch.Tensor | np.ndarray:
+    """:func:`symmetric_normal` of the standard normal draws ``x`` [..., N, N]."""
     if numpy:
         x = x.numpy()
-        diagonal = np.eye(shape[-1], dtype=bool)
+        diagonal = np.eye(x.shape[-1], dtype=bool)
         return np.where(diagonal, x, (x + x.swapaxes(-1, -2)) * (0.5**0.5))
-    diagonal = torch.eye(shape[-1], dtype=torch.bool, device=x.device)
+    diagonal = torch.eye(x.shape[-1], dtype=torch.bool, device=x.device)
     return torch.where(diagonal, x, (x + x.transpose(-1, -2)) * (0.5**0.5))
 
 

@@ -21,6 +21,7 @@ own matmul, see :func:`subframe_step`).
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, fields, replace
 from functools import cache, lru_cache
 
@@ -192,14 +193,16 @@ CHUNK_VALUES = 1 << 16
 
 class FadingWorkspace:
     """Buffers the torch path reuses from interval to interval: the interval's normal draws
-    and the scratch of a chunk. Never state (each interval overwrites them): it has no
+    and the scratch of a chunk, and the next interval's draws when a :class:`DrawAhead` is
+    making them (``ahead``). Never state (each interval overwrites them): it has no
     ``__dict__``, so snapshots (:mod:`vdtn_marl.sim.snapshot`) skip it, and a deep copy of a
-    twin copies it."""
+    twin gets a fresh one."""
 
-    __slots__ = ("_buffers",)
+    __slots__ = ("_buffers", "ahead")
 
     def __init__(self):
         self._buffers: dict[str, torch.Tensor] = {}
+        self.ahead: DrawAhead | None = None
 
     def get(self, name: str, shape: tuple[int, ...], like: torch.Tensor) -> torch.Tensor:
         """The buffer ``name`` of ``shape`` in ``like``'s dtype and device (kept, or new)."""
@@ -215,6 +218,98 @@ class FadingWorkspace:
 
     def __deepcopy__(self, memo) -> FadingWorkspace:
         return FadingWorkspace()  # scratch: nothing to copy
+
+
+def fading_buffer(
+    workspace: FadingWorkspace, batch: int, width: int, subframes: int, like: torch.Tensor,
+    fading_draws: str,
+) -> torch.Tensor:  # fmt: skip
+    """The buffer the link-major path draws an interval's fading into: the normals
+    ``[2, T, B, W]``, or the Exp(1) gains ``[T, W, B]`` (``fading_draws="exponential"``)."""
+    if fading_draws == "exponential":
+        return workspace.get("exponential", (subframes, width, batch), like)
+    return workspace.get("normals", (2, subframes, batch, width), like)
+
+
+def draw_fading(buffer: torch.Tensor, generator: torch.Generator, fading_draws: str) -> None:
+    """Fill :func:`fading_buffer`'s ``buffer`` with the interval's fading draws (one call: the
+    same numbers as :func:`~vdtn_marl.sim.channel.rayleigh_power_gain`'s randn)."""
+    if fading_draws != "exponential":
+        buffer.normal_(generator=generator)
+    elif buffer.device.type == "cpu":
+        rayleigh_power_gain_exponential(buffer.shape, generator, out=buffer.numpy())
+    else:
+        buffer.exponential_(generator=generator)
+
+
+def draw_interval(
+    generator: torch.Generator, batch: int, vehicles: int, fading: torch.Tensor | None,
+    fading_draws: str,
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:  # fmt: skip
+    """An interval's random draws in their fixed order: the V2V shadowing innovation
+    ``[B, N, N]`` (before :func:`~vdtn_marl.sim.channel.symmetrize`), the V2I innovation
+    ``[B, N]``, then the fast fading into ``fading`` (a :func:`fading_buffer`; None: the
+    caller's :func:`build_interval_tables` draws it next). The only copy of this order: the
+    twin draws with it, and :class:`DrawAhead` with a copy of the twin's generator."""
+    device = generator.device
+    v2v = torch.randn((batch, vehicles, vehicles), generator=generator, device=device)
+    v2i = torch.randn(batch, vehicles, generator=generator, device=device)
+    if fading is not None:
+        draw_fading(fading, generator, fading_draws)
+    return v2v, v2i, fading
+
+
+#: from this many scenarios the CPU twin makes the next interval's draws on a second thread
+#: while the subframes run (:class:`DrawAhead`); below it a thread costs about what the draws
+#: do (at B = 4,096 they are more than half of the interval's work, docs/profile.md)
+DRAW_AHEAD_MIN_BATCH = 128
+
+
+class DrawAhead:
+    """The next interval's :func:`draw_interval`, made on a second thread from a copy of the
+    twin's generator while this interval's subframes run (torch releases the GIL in its
+    kernels, so a second core draws while the first steps the radio).
+
+    :meth:`take` hands the draws over, and moves the twin's generator to where the copy
+    ended, only if the twin's generator has not drawn since the copy was taken (a reset, a
+    burn-in, a restored snapshot draw or set it): otherwise it returns None and the twin draws
+    again itself, in order. Either way the numbers are those of drawing in place, bit for bit;
+    the generator itself is never touched by the thread, so snapshots and deep copies of the
+    twin see it as if nothing were pending."""
+
+    __slots__ = ("_start", "_result", "_thread")
+
+    def __init__(
+        self, generator: torch.Generator, batch: int, vehicles: int, fading: torch.Tensor,
+        fading_draws: str,
+    ):  # fmt: skip
+        self._start = generator.get_state()
+        copy = torch.Generator(device=generator.device)
+        copy.set_state(self._start)
+        self._result: dict = {}
+
+        def job() -> None:
+            try:
+                draws = draw_interval(copy, batch, vehicles, fading, fading_draws)
+                self._result["done"] = (draws, copy.get_state())  # one store: all or nothing
+            except BaseException as error:  # re-raised by take()
+                self._result["error"] = error
+
+        self._thread = threading.Thread(target=job, name="vdtn-draw-ahead", daemon=True)
+        self._thread.start()
+
+    def take(self, generator: torch.Generator):
+        """The draws ``(v2v, v2i, fading)``, ``generator`` advanced past them, or None when
+        ``generator`` has drawn (or been set) since: then the caller draws them itself."""
+        self._thread.join()  # also after a fork: the copied thread counts as stopped
+        if "error" in self._result:
+            raise self._result["error"]
+        done = self._result.get("done")
+        if done is None or not torch.equal(generator.get_state(), self._start):
+            return None
+        draws, end = done
+        generator.set_state(end)
+        return draws
 
 
 def _chunk_subframes(batch: int, width: int, subframes: int) -> int:
@@ -233,6 +328,7 @@ def build_interval_tables(
     workspace: FadingWorkspace | None = None,
     out: IntervalTables | None = None,
     fading_draws: str = "normal",
+    drawn: torch.Tensor | None = None,
 ) -> IntervalTables:
     """Draw the interval's Rayleigh fading and assemble the linear tables.
 
@@ -253,7 +349,8 @@ def build_interval_tables(
     On torch the draws land in ``workspace``'s buffer and the tables are built link-major,
     a chunk of subframes at a time (:data:`CHUNK_VALUES`), into ``out``'s storage when it has
     the right shapes and is link-major (the previous interval's tables, overwritten), else
-    into new tensors.
+    into new tensors. ``drawn`` (torch): a :func:`fading_buffer` that already holds the
+    interval's fading draws (:func:`draw_interval`), which are then not drawn again.
     """
     b, n = v2i_gain_db.shape
     links, subch, t = topology.num_links, radio.num_subchannels, num_subframes
@@ -283,9 +380,15 @@ def build_interval_tables(
             workspace or FadingWorkspace(),
             out,
             fading_draws,
+            drawn,
         )
 
-    if fading_draws == "exponential":  # [T, W, B] as link-major, seen as [T, B, W]
+    if drawn is not None:  # the same numbers as the two draws below
+        if fading_draws == "exponential":  # [T, W, B] seen as [T, B, W]
+            fading = drawn.transpose(1, 2)
+        else:
+            fading = 0.5 * (drawn[0] * drawn[0] + drawn[1] * drawn[1])
+    elif fading_draws == "exponential":  # [T, W, B] as link-major, seen as [T, B, W]
         fading = rayleigh_power_gain_exponential((t, width, b), generator).transpose(0, 2, 1)
         if not numpy:
             fading = torch.from_numpy(fading).to(v2i_gain_db.device)
@@ -346,8 +449,9 @@ def _reusable(out: IntervalTables | None, shapes: list[tuple[int, ...]], like: t
 
 
 def _build_tables_link_major(
-    large_scale, v2i_power_mw: float, t: int, width: int, generator, workspace, out, fading_draws
-) -> IntervalTables:
+    large_scale, v2i_power_mw: float, t: int, width: int, generator, workspace, out, fading_draws,
+    drawn=None,
+) -> IntervalTables:  # fmt: skip
     """The torch path of :func:`build_interval_tables`: the same float32 operations on every
     entry as the NumPy path, written link-major a chunk of subframes at a time. The own,
     V2I→rx and tx→BS gains share one storage [T, 3, L, M, B] (one multiplication builds the
@@ -371,15 +475,11 @@ def _build_tables_link_major(
 
     chunk = _chunk_subframes(b, width, t)
     block = links * subch
-    if fading_draws == "exponential":  # |h|² ~ Exp(1) drawn link-major: [T, W, B]
-        drawn = workspace.get("exponential", (t, width, b), own_ls)
-        if drawn.device.type == "cpu":
-            rayleigh_power_gain_exponential(drawn.shape, generator, out=drawn.numpy())
-        else:
-            drawn.exponential_(generator=generator)
-    else:  # the interval's draws in one call: the same numbers as rayleigh_power_gain's randn
-        normals = workspace.get("normals", (2, t, b, width), own_ls)
-        normals.normal_(generator=generator)
+    # |h|² ~ Exp(1) drawn link-major [T, W, B], or the normals [2, T, B, W] in one call
+    if drawn is None:
+        drawn = fading_buffer(workspace, b, width, t, own_ls, fading_draws)
+        draw_fading(drawn, generator, fading_draws)
+    normals = drawn
     for t0 in range(0, t, chunk):
         t1 = min(t, t0 + chunk)
         c = t1 - t0

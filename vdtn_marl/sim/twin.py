@@ -171,6 +171,10 @@ class DigitalTwin:
             ``"exponential"`` (one Exp(1) draw per gain from NumPy's ziggurat seeded by the
             twin's generator: the same law, other numbers, the interval's draws in a fraction
             of the time; docs/profile.md). Both backends see the same numbers either way.
+        draw_ahead: on the CPU from :data:`~vdtn_marl.sim.link.DRAW_AHEAD_MIN_BATCH`
+            scenarios, make the next interval's draws on a second thread while this
+            interval's subframes run (:class:`~vdtn_marl.sim.link.DrawAhead`): the same
+            numbers, bit for bit, on a second core. False: draw at each interval's start.
     """
 
     # the state, held in the backend's arrays as ``_<name>``; torch tensors to callers
@@ -200,6 +204,7 @@ class DigitalTwin:
         backend: str = "torch",
         lookahead_intervals: int = 200,
         fading_draws: str = "normal",
+        draw_ahead: bool = True,
     ):
         self.params = (params or TwinParams()).validate()
         if (
@@ -224,6 +229,13 @@ class DigitalTwin:
         if lookahead_intervals < 0:
             raise ConfigError(f"lookahead_intervals={lookahead_intervals!r} must be >= 0")
         self.batch_size = int(batch_size)
+        #: whether the next interval's draws are made on a second thread (see the class doc)
+        self.draw_ahead = (
+            bool(draw_ahead)
+            and backend == "torch"
+            and self.device.type == "cpu"
+            and self.batch_size >= link.DRAW_AHEAD_MIN_BATCH
+        )
         self.radio_enabled = radio
         self.backend = backend
         self.lookahead_intervals = lookahead_intervals
@@ -412,6 +424,12 @@ class DigitalTwin:
             obs,
             v2i_sum,
         )
+        if self.draw_ahead:  # the next interval's draws, while this one's subframes run
+            n, width = self.params.platoon.num_vehicles, self._fading_width()
+            fading = link.fading_buffer(
+                self._workspace, b, width, t, self._time_left, self.fading_draws
+            )
+            self._workspace.ahead = link.DrawAhead(self.generator, b, n, fading, self.fading_draws)
 
     def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
@@ -420,20 +438,36 @@ class DigitalTwin:
         self._shadow_position_m = ns.copy(x)
         g = self.generator
         n = x.shape[1]
-        # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends
+        # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends:
+        # made ahead on a second thread (begin_interval), or here
+        ahead, self._workspace.ahead = self._workspace.ahead, None
+        draws = None if ahead is None else ahead.take(g)
+        if draws is None:
+            fading = None  # NumPy: build_interval_tables draws it, as NumPy arrays
+            if not ns.numpy:
+                fading = link.fading_buffer(
+                    self._workspace,
+                    self.batch_size,
+                    self._fading_width(),
+                    self.subframes_per_interval,
+                    self._time_left,
+                    self.fading_draws,
+                )
+            draws = link.draw_interval(g, self.batch_size, n, fading, self.fading_draws)
+        v2v_innovation, v2i_innovation, drawn = draws
         self._v2v_shadow_db = v2v_shadow = channel.shadowing_update_db(
             self._v2v_shadow_db,
             moved[:, :, None] + moved[:, None, :],
             rp.v2v_shadow_std_db,
             rp.v2v_decorrelation_m,
-            channel.symmetric_normal((self.batch_size, n, n), g, numpy=ns.numpy),
+            channel.symmetrize(v2v_innovation, numpy=ns.numpy),
         )
         self._v2i_shadow_db = v2i_shadow = channel.shadowing_update_db(
             self._v2i_shadow_db,
             moved,
             rp.v2i_shadow_std_db,
             rp.v2i_decorrelation_m,
-            ns.from_torch(torch.randn(self.batch_size, n, generator=g, device=self.device)),
+            ns.from_torch(v2i_innovation),
         )
         bs_x = channel.serving_bs_x_m(mean_axis(x, 1), self._bs_offset_m, rp)
         lateral = self._lateral_offset_m
@@ -454,7 +488,13 @@ class DigitalTwin:
             workspace=self._workspace,
             out=self.tables if reuse else None,
             fading_draws=self.fading_draws,
+            drawn=drawn,
         )
+
+    def _fading_width(self) -> int:
+        """W = 3LM + L² + M fading gains per scenario and subframe."""
+        links, subch = self.num_links, self.num_subchannels
+        return 3 * links * subch + links * links + subch
 
     def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
