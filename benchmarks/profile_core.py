@@ -9,7 +9,8 @@ at each interval end the impaired vehicle observation, a CACC command, ``finish_
   interval's close (vehicle observation, CACC, ``finish_interval``) and the next interval's
   start (``begin_interval``: shadowing, the interval's fading draws, tables and RRA
   observation buffer), as milliseconds and shares, and the agent-subframe steps/s they add
-  up to;
+  up to. The twin draws at each interval's start (``draw_ahead=False``), so that the draws
+  show in the start's profile; ``benchmarks/throughput.py`` times both ways;
 - torch profiler tables of the start of an interval and of the subframes: each operator's
   share of the phase's self CPU time and its calls per interval;
 - the machine's limits measured in the same run: ``Tensor.normal_`` draws/s (the reference
@@ -104,8 +105,10 @@ class CoreDriver:
         from vdtn_marl.policies.cacc import CACCController
         from vdtn_marl.sim.twin import DigitalTwin
 
+        # the draws at the interval start (not on a second thread), so that each phase's
+        # operators are its own
         self.twin = DigitalTwin(
-            batch_size=batch, device=device, seed=seed, fading_draws=fading_draws
+            batch_size=batch, device=device, seed=seed, fading_draws=fading_draws, draw_ahead=False
         )
         self.device = self.twin.device
         self.controller = CACCController(self.twin.params.platoon)

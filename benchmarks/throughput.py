@@ -13,7 +13,10 @@ Measures
 
 Targets (printed, not asserted; DESIGN §7): ≥ 12,000 subframes/s for (a) with the rollout VoI
 on a quiet machine, and ≥ 2× the peer's subframes/s side by side; ≥ 4,000,000 agent-subframe
-steps/s for (b) at B = 4096 on the CPU, and no lower at a larger B; ≥ 100,000,000 on CUDA.
+steps/s for (b) at B = 4096 on the CPU (2 cores), no lower at a larger B, and ≥ 160× the peer's
+agent-subframe steps/s side by side; ≥ 100,000,000 on CUDA. From B = 128 the CPU twin makes
+the next interval's random draws on a second thread while the subframes run (the same numbers;
+``--draw-ahead off`` adds rows that draw at each interval's start, for the ratio).
 
 Every measurement runs ``--repeats`` times (interleaved: all rows, then all rows again), and the
 table and the targets use the median; the JSON keeps every run, with the load average before
@@ -65,6 +68,8 @@ TARGET_ENV_SUBFRAMES_PER_S = 12_000.0
 TARGET_ENV_PEER_RATIO = 2.0
 TARGET_CORE_AGENT_STEPS_PER_S = {"cpu": 4_000_000.0, "cuda": 100_000_000.0}
 TARGET_CORE_BATCH = 4096
+#: the batched core at TARGET_CORE_BATCH against the peer's agent-subframe steps/s (DESIGN §7)
+TARGET_CORE_PEER_RATIO = 160.0
 PEERS = ("liang",)
 
 
@@ -92,6 +97,14 @@ def parse_args(argv=None) -> argparse.Namespace:
         choices=("normal", "exponential"),
         default=["normal"],
         help="the batched core's fast-fading draws (DigitalTwin fading_draws), one row each",
+    )
+    p.add_argument(
+        "--draw-ahead",
+        nargs="+",
+        choices=("on", "off"),
+        default=["on"],
+        help="the batched core's draws: 'on' makes the next interval's on a second thread "
+        "(DigitalTwin draw_ahead, the default), 'off' at each interval's start; one row each",
     )
     p.add_argument(
         "--rows",
@@ -208,6 +221,7 @@ def bench_core(
     seed: int,
     traces: str,
     fading_draws: str = "normal",
+    draw_ahead: bool = True,
 ) -> dict:
     from vdtn_marl.policies.cacc import CACCController
     from vdtn_marl.sim.twin import DigitalTwin
@@ -219,6 +233,7 @@ def bench_core(
         backend=backend,
         trace_source=traces,
         fading_draws=fading_draws,
+        draw_ahead=draw_ahead,
     )
     dev = twin.device
     controller = CACCController(twin.params.platoon)
@@ -264,8 +279,12 @@ def bench_core(
     name = dev.type if dev.type == "cpu" else torch.cuda.get_device_name(dev)
     return {
         "name": f"DigitalTwin B={batch} {backend}/{dev.type}"
-        + ("" if fading_draws == "normal" else f" {fading_draws} fading"),
+        + ("" if fading_draws == "normal" else f" {fading_draws} fading")
+        + ("" if draw_ahead else ", draw-ahead off"),
         "fading_draws": fading_draws,
+        # whether the next interval's draws were made on a second thread (DigitalTwin)
+        "draw_ahead": twin.draw_ahead,
+        "draw_ahead_requested": draw_ahead,
         "kind": "core",
         "batch_size": batch,
         "device": str(dev),
@@ -439,11 +458,14 @@ def _targets(results: list[dict]) -> list[dict]:
                     }
                 )
     core = [r for r in results if r["kind"] == "core" and r["backend"] == "torch"]
-    for device, draws in dict.fromkeys((r["device"], r["fading_draws"]) for r in core):
-        rows = sorted(
-            (r for r in core if (r["device"], r["fading_draws"]) == (device, draws)),
-            key=lambda r: r["batch_size"],
-        )
+    # one series per device, fading draws and --draw-ahead setting (rows below
+    # DRAW_AHEAD_MIN_BATCH draw at the interval start in either series)
+    def series(r):
+        return r["device"], r["fading_draws"], r.get("draw_ahead_requested", True)
+
+    for key in dict.fromkeys(series(r) for r in core):
+        device, draws, ahead = key
+        rows = sorted((r for r in core if series(r) == key), key=lambda r: r["batch_size"])
         target = TARGET_CORE_AGENT_STEPS_PER_S["cuda" if device.startswith("cuda") else "cpu"]
         at = [r for r in rows if r["batch_size"] >= TARGET_CORE_BATCH]
         if at:
@@ -456,13 +478,25 @@ def _targets(results: list[dict]) -> list[dict]:
                     "met": r["agent_steps_per_s"] >= target,
                 }
             )
+            if "peer_ratio" in r and not device.startswith("cuda"):
+                out.append(
+                    {
+                        "target": f"(b) {r['name']}: >= {TARGET_CORE_PEER_RATIO:g}x the peer's "
+                        "agent-subframe steps/s",
+                        "value": r["peer_ratio"],
+                        "range": [min(r["peer_ratio_runs"]), max(r["peer_ratio_runs"])],
+                        "met": r["peer_ratio"] >= TARGET_CORE_PEER_RATIO,
+                    }
+                )
         big = [r for r in rows if r["batch_size"] >= 1024]
         if len(big) > 1:
             rates = [r["agent_steps_per_s"] for r in big]
             sizes = ", ".join(f"{r['batch_size']:,}" for r in big)
             out.append(
                 {
-                    "target": f"(b) {device}, {draws} fading: agent-subframe steps/s no "
+                    "target": f"(b) {device}, {draws} fading"
+                    + ("" if ahead else ", draw-ahead off")
+                    + ": agent-subframe steps/s no "
                     "lower at a larger B "
                     f"(B = {sizes})",
                     "value": min(b / a for a, b in zip(rates, rates[1:], strict=False)),
@@ -549,15 +583,17 @@ def main(argv=None) -> int:
         for device in args.device:
             sizes = args.cuda_batch_sizes if device.startswith("cuda") else args.batch_sizes
             for draws in args.fading_draws:
-                for batch in sizes:
-                    jobs.append(
-                        (
-                            f"DigitalTwin B={batch} torch/{device} {draws} fading",
-                            lambda b=batch, d=device, f=draws: bench_core(
-                                b, d, "torch", seconds, seed, args.traces, f
-                            ),
+                for ahead in args.draw_ahead:
+                    for batch in sizes:
+                        jobs.append(
+                            (
+                                f"DigitalTwin B={batch} torch/{device} {draws} fading, "
+                                f"draw-ahead {ahead}",
+                                lambda b=batch, d=device, f=draws, a=ahead == "on": bench_core(
+                                    b, d, "torch", seconds, seed, args.traces, f, a
+                                ),
+                            )
                         )
-                    )
     peer = None
     if args.peer is not None:
         peer = load_liang(args.peer[1])

@@ -131,3 +131,34 @@ def test_profile_writes_each_fading_law_to_its_own_file_by_default():
     exponential = module.parse_args(["--fading-draws", "exponential"])
     assert exponential.out.name == "profile_core_exponential.json"
     assert module.parse_args(["--out", "x.json"]).out.name == "x.json"
+
+
+def test_draw_ahead_rows_are_their_own_series(tmp_path):
+    """``--draw-ahead on off``: one row each, recorded in the JSON; the targets judge each
+    series on its own rows."""
+    out = tmp_path / "t.json"
+    module = _module()
+    args = ["--seconds", "0.02", "--repeats", "1", "--rows", "core", "--no-cuda"]
+    sizes = ["--batch-sizes", "128", "4096", "8192"]
+    monkey_rows = []
+
+    def fake_core(batch, device, backend, seconds, seed, traces, fading="normal", ahead=True):
+        monkey_rows.append((batch, backend, ahead))
+        rate = 1000.0 * (2.0 if ahead else 1.0)
+        return {
+            "name": f"B={batch}" + ("" if ahead else ", draw-ahead off"),
+            "kind": "core", "batch_size": batch, "device": device, "backend": backend,
+            "fading_draws": fading, "draw_ahead": ahead and batch >= 128,
+            "draw_ahead_requested": ahead, "subframes_per_s": rate,
+            "agent_steps_per_s": rate * batch * 3,
+        }  # fmt: skip
+
+    module.bench_core = fake_core
+    assert module.main([*args, *sizes, "--draw-ahead", "on", "off", "--out", str(out)]) == 0
+    assert (128, "torch", True) in monkey_rows and (128, "torch", False) in monkey_rows
+    targets = json.loads(out.read_text())["targets"]
+    named = [t["target"] for t in targets]
+    assert sum("no lower at a larger B" in name for name in named) == 2
+    assert any("draw-ahead off: agent-subframe" in name for name in named)
+    steps = [t for t in targets if ">= 4,000,000" in t["target"]]
+    assert sorted(t["value"] for t in steps) == [1000.0 * 4096 * 3, 2000.0 * 4096 * 3]
