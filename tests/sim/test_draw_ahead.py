@@ -3,6 +3,8 @@ True)``, :class:`~vdtn_marl.sim.link.DrawAhead`) gives the numbers of drawing in
 bit: across partial resets, extra draws from the twin's generator, snapshots and deep copies."""
 
 import copy
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -130,3 +132,16 @@ def test_draw_ahead_only_where_it_pays():
     assert not DigitalTwin(PARAMS, batch_size=below, draw_ahead=True).draw_ahead
     assert not DigitalTwin(PARAMS, batch_size=1, backend="numpy", draw_ahead=True).draw_ahead
     assert DigitalTwin(PARAMS, batch_size=link.DRAW_AHEAD_MIN_BATCH).draw_ahead  # the default
+
+
+def test_the_interpreter_exits_cleanly_with_draws_pending():
+    """A draw still running at exit is waited for: finalizing the interpreter under a running
+    torch kernel aborts the process ('terminate called without an active exception')."""
+    code = (
+        "from vdtn_marl.sim.twin import DigitalTwin\n"
+        "twin = DigitalTwin(batch_size=4096, seed=1)\n"
+        "assert twin._workspace.ahead is not None\n"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert "terminate" not in done.stderr

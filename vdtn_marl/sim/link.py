@@ -295,7 +295,9 @@ class DrawAhead:
             except BaseException as error:  # re-raised by take()
                 self._result["error"] = error
 
-        self._thread = threading.Thread(target=job, name="vdtn-draw-ahead", daemon=True)
+        # not a daemon: the interpreter waits for it at exit instead of finalizing under a
+        # running torch kernel (which aborts the process)
+        self._thread = threading.Thread(target=job, name="vdtn-draw-ahead", daemon=False)
         self._thread.start()
 
     def take(self, generator: torch.Generator):
