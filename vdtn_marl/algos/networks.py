@@ -31,7 +31,6 @@ TanhNormal policy. Without a prior the policy starts from zero commands.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 import torch
@@ -285,40 +284,6 @@ def make_actor(
     )
 
 
-def categorical_mode(logits: torch.Tensor) -> torch.Tensor:
-    """``torch.distributions.Categorical(logits=logits).mode`` [..., A] → long [...], bit for
-    bit: the argmax of the softmax of the logits normalised by their logsumexp.
-
-    On the CPU the argmax of the logits themselves, which is the same index wherever the
-    largest logit exceeds every other by more than :func:`_tie_tolerance` (rounding in the
-    normalisation and the softmax cannot reorder such entries, nor make them equal); rows
-    with a closer runner-up, a tie or a non-finite maximum take the normalised path. That
-    skips three of its four passes over the logits in nearly every row. On other devices the
-    normalised path always (the check would wait for the device)."""
-    if logits.device.type != "cpu":
-        return _normalised_mode(logits)
-    values, index = logits.max(dim=-1)
-    tolerance = _tie_tolerance(logits.shape[-1])
-    close = (logits >= (values - tolerance).unsqueeze(-1)).sum(dim=-1) != 1
-    close |= ~torch.isfinite(values)
-    if bool(close.any()):
-        index = torch.where(close, _normalised_mode(logits), index)
-    return index
-
-
-def _normalised_mode(logits: torch.Tensor) -> torch.Tensor:
-    logits = logits - logits.logsumexp(dim=-1, keepdim=True)  # as Categorical holds them
-    return F.softmax(logits, dim=-1).argmax(dim=-1)  # Categorical.mode: probs.argmax
-
-
-def _tie_tolerance(num_actions: int) -> float:
-    """A margin of the largest logit over the others that survives the normalisation: x − lse
-    rounds each near-maximal entry by at most 2⁻²⁴·(ln A + margin), so the normalised gap
-    stays above 2⁻¹⁵, where float32 exp and the softmax's division keep the two entries
-    apart (their rounding is a few 2⁻²⁴ relative). 2⁻¹⁶·(2 + ln A): ≈ 7·10⁻⁵ for 16 actions."""
-    return 2.0**-16 * (2.0 + math.log(max(num_actions, 1)))
-
-
 class CategoricalMode:
     """The deterministic action of a discrete actor of :func:`make_actor` with shared
     parameters: observations [..., n_agents, D] → long [..., n_agents], bit for bit what the
@@ -385,7 +350,8 @@ class CategoricalMode:
                 x = F.linear(x, weights["weight"], weights["bias"])
             else:
                 x = function(x)
-        return categorical_mode(x)
+        logits = x - x.logsumexp(dim=-1, keepdim=True)  # as Categorical(logits=...) holds them
+        return F.softmax(logits, dim=-1).argmax(dim=-1)  # Categorical.mode: probs.argmax
 
 
 def make_critic(
