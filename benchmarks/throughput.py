@@ -458,6 +458,7 @@ def _targets(results: list[dict]) -> list[dict]:
                     }
                 )
     core = [r for r in results if r["kind"] == "core" and r["backend"] == "torch"]
+
     # one series per device, fading draws and --draw-ahead setting (rows below
     # DRAW_AHEAD_MIN_BATCH draw at the interval start in either series)
     def series(r):

@@ -1,7 +1,7 @@
 """The arithmetic of the training-throughput benchmarks (stage_throughput.py,
-paper_batch_pairing.py and activation_cost.py): ratios in the same repeat, the size choice,
-the iteration estimate, the paired differences and the refusal of bad arguments. The timed
-runs themselves are benchmarks, never tests."""
+paper_batch_pairing.py, activation_cost.py and draw_ahead.py): ratios in the same repeat, the
+size choice, the iteration estimate, the paired differences and the refusal of bad arguments.
+The timed runs themselves are benchmarks, never tests."""
 
 from __future__ import annotations
 
@@ -23,6 +23,7 @@ def _script(name: str):
 stages = _script("stage_throughput.py")
 pairing = _script("paper_batch_pairing.py")
 activation = _script("activation_cost.py")
+draw_ahead = _script("draw_ahead.py")
 
 
 def _run(stage, batch, repeat, seconds, cpu_seconds, frames=25_600):
@@ -232,3 +233,43 @@ def test_activation_cost_refuses_bad_arguments(capsys):
         activation.parse_args(["--stages", "pi_star,warp"])
     assert "--stages" in capsys.readouterr().err + str(refused.value.code)
     assert activation.parse_args(["--stages", "none"]).stages == []
+
+
+def _pair(stage, pair, ahead, at_start):
+    common = {"stage": stage, "pair": pair}
+    return [
+        {**common, "setting": "ahead", "wall_s": ahead, "cpu_s": ahead + 1},
+        {**common, "setting": "at_start", "wall_s": at_start, "cpu_s": at_start},
+    ]
+
+
+def test_draw_ahead_ratios_are_paired_and_the_iteration_adds_each_budget():
+    runs = [
+        *_pair("pi_star", 0, 1.0, 1.0),
+        *_pair("pi_tilde_random", 0, 2.0, 2.4),
+        *_pair("pi_tilde_learned", 0, 4.0, 5.0),
+        *_pair("pi_tilde_learned", 1, 8.0, 8.8),  # a slow pair: its own ratio, 1.1
+        *_pair("pi_tilde_learned", 2, 4.0, 6.0),
+        *_pair("rra", 0, 3.0, 3.0),
+    ]
+    rows = {r["stage"]: r for r in draw_ahead.summarise(runs)}
+    learned = rows["pi_tilde_learned"]
+    assert learned["at_start_over_ahead"] == pytest.approx(1.25)  # median of 1.25, 1.1, 1.5
+    assert (learned["ratio_min"], learned["ratio_max"], learned["pairs"]) == (1.1, 1.5, 3)
+    assert learned["wall_s_ahead"] == 4.0 and learned["cpu_s_ahead"] == 5.0
+    minutes = draw_ahead.iteration_minutes(
+        list(rows.values()), {"control_iterations": 500, "rra_iterations": 300}
+    )
+    assert minutes["first_ahead"] == pytest.approx((500 * 1.0 + 500 * 2.0 + 300 * 3.0) / 60)
+    assert minutes["later_at_start"] == pytest.approx((500 * 1.0 + 500 * 6.0 + 300 * 3.0) / 60)
+    partial = draw_ahead.iteration_minutes([rows["rra"]], {"control_iterations": 1})
+    assert partial == {}  # stages missing: no estimate
+
+
+def test_draw_ahead_refuses_bad_arguments(capsys):
+    with pytest.raises(SystemExit) as refused:
+        draw_ahead.parse_args(["--stages", "pi_star,warp"])
+    assert "--stages" in capsys.readouterr().err + str(refused.value.code)
+    with pytest.raises(SystemExit):
+        draw_ahead.parse_args(["--repeats", "0"])
+    assert "--repeats" in capsys.readouterr().err

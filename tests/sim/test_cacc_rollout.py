@@ -56,9 +56,7 @@ def test_fused_cacc_rollout_equals_the_general_loop(scenario, batch):
     # a crowded copy: followers pushed into their predecessors, so rows collide mid-rollout
     crowded = state.repeat(branches)
     position = crowded.position_m.copy()
-    position[: batch * 2] += rng.uniform(0.0, 12.0, position[: batch * 2].shape).astype(
-        np.float32
-    )
+    position[: batch * 2] += rng.uniform(0.0, 12.0, position[: batch * 2].shape).astype(np.float32)
     crowded = PlatoonState(position, crowded.speed_mps, crowded.accel_mps2, crowded.command_mps2)
     near_end = np.full(rows, params.episode_intervals - 4, np.int64)
     cases = [
@@ -71,7 +69,15 @@ def test_fused_cacc_rollout_equals_the_general_loop(scenario, batch):
         for stop in (False, True):
             runs = [
                 rollout_module._rollout(
-                    twin, case_state, interval, cacc, 6, 0.97, command, first_switch, stop,
+                    twin,
+                    case_state,
+                    interval,
+                    cacc,
+                    6,
+                    0.97,
+                    command,
+                    first_switch,
+                    stop,
                     fused=fused,
                 )  # fmt: skip
                 for fused in (True, False)

@@ -239,8 +239,7 @@ def _cacc_rollout_numpy(
                 g_new = gain[t - first_switch]
         else:  # CACCController.perfect_command
             u = (
-                policy.gap_gain
-                * minimum(maximum(gap_error, -GAP_ERROR_BOUND_M), GAP_ERROR_BOUND_M)
+                policy.gap_gain * minimum(maximum(gap_error, -GAP_ERROR_BOUND_M), GAP_ERROR_BOUND_M)
                 + policy.speed_gain
                 * minimum(maximum(speed_error, -SPEED_ERROR_BOUND_MPS), SPEED_ERROR_BOUND_MPS)
                 + policy.feedforward_gain * minimum(maximum(command[:, pi], lo), hi)
