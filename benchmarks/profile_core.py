@@ -216,8 +216,9 @@ def _phase_ops(prof, phase: str, intervals: int) -> list[dict]:
 
 def _draws_per_interval(twin) -> int:
     """Fast-fading draws of one interval: two normals per gain, or one exponential."""
-    links, subch = twin.num_links, twin.num_subchannels
-    gains = 3 * links * subch + links * links + subch
+    from vdtn_marl.sim.link import fading_width
+
+    gains = fading_width(twin.num_links, twin.num_subchannels)
     per_gain = 2 if twin.fading_draws == "normal" else 1
     return per_gain * twin.subframes_per_interval * twin.batch_size * gains
 
@@ -225,9 +226,10 @@ def _draws_per_interval(twin) -> int:
 def _table_bytes(twin) -> int:
     """Bytes of float32 the interval's start writes at least once: the draws, the tables and
     the RRA observation buffer."""
-    links, subch, t = twin.num_links, twin.num_subchannels, twin.subframes_per_interval
-    b = twin.batch_size
-    gains = 3 * links * subch + links * links + subch
+    from vdtn_marl.sim.link import fading_width
+
+    links, t, b = twin.num_links, twin.subframes_per_interval, twin.batch_size
+    gains = fading_width(links, twin.num_subchannels)
     return 4 * t * b * (2 * gains + gains + links * twin.rra_obs_dim)
 
 

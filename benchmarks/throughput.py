@@ -434,6 +434,16 @@ def _peer_ratios(results: list[dict]) -> None:
         r["peer_ratio_of"] = "agent-subframe steps/s" if per_agent else "subframes/s"
 
 
+def _peer_target(r: dict, ratio: float, part: str, unit: str) -> dict:
+    """Row ``r`` against ``ratio`` × the peer's ``unit`` (median of the per-run ratios)."""
+    return {
+        "target": f"{part} {r['name']}: >= {ratio:g}x the peer's {unit}",
+        "value": r["peer_ratio"],
+        "range": [min(r["peer_ratio_runs"]), max(r["peer_ratio_runs"])],
+        "met": r["peer_ratio"] >= ratio,
+    }
+
+
 def _targets(results: list[dict]) -> list[dict]:
     out = []
     for r in results:
@@ -448,15 +458,7 @@ def _targets(results: list[dict]) -> list[dict]:
                 }
             )
             if "peer_ratio" in r:
-                out.append(
-                    {
-                        "target": f"(a) {r['name']}: >= {TARGET_ENV_PEER_RATIO:g}x the peer's "
-                        "subframes/s",
-                        "value": r["peer_ratio"],
-                        "range": [min(r["peer_ratio_runs"]), max(r["peer_ratio_runs"])],
-                        "met": r["peer_ratio"] >= TARGET_ENV_PEER_RATIO,
-                    }
-                )
+                out.append(_peer_target(r, TARGET_ENV_PEER_RATIO, "(a)", "subframes/s"))
     core = [r for r in results if r["kind"] == "core" and r["backend"] == "torch"]
 
     # one series per device, fading draws and --draw-ahead setting (rows below
@@ -480,15 +482,8 @@ def _targets(results: list[dict]) -> list[dict]:
                 }
             )
             if "peer_ratio" in r and not device.startswith("cuda"):
-                out.append(
-                    {
-                        "target": f"(b) {r['name']}: >= {TARGET_CORE_PEER_RATIO:g}x the peer's "
-                        "agent-subframe steps/s",
-                        "value": r["peer_ratio"],
-                        "range": [min(r["peer_ratio_runs"]), max(r["peer_ratio_runs"])],
-                        "met": r["peer_ratio"] >= TARGET_CORE_PEER_RATIO,
-                    }
-                )
+                unit = "agent-subframe steps/s"
+                out.append(_peer_target(r, TARGET_CORE_PEER_RATIO, "(b)", unit))
         big = [r for r in rows if r["batch_size"] >= 1024]
         if len(big) > 1:
             rates = [r["agent_steps_per_s"] for r in big]

@@ -9,6 +9,7 @@ import sys
 import pytest
 import torch
 
+from vdtn_marl.errors import ConfigError
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import link
 from vdtn_marl.sim.params import TwinParams
@@ -132,6 +133,8 @@ def test_draw_ahead_only_where_it_pays():
     assert not DigitalTwin(PARAMS, batch_size=below, draw_ahead=True).draw_ahead
     assert not DigitalTwin(PARAMS, batch_size=1, backend="numpy", draw_ahead=True).draw_ahead
     assert DigitalTwin(PARAMS, batch_size=link.DRAW_AHEAD_MIN_BATCH).draw_ahead  # the default
+    with pytest.raises(ConfigError, match="draw_ahead"):
+        DigitalTwin(PARAMS, batch_size=1, draw_ahead="no")
 
 
 def test_the_interpreter_exits_cleanly_with_draws_pending():

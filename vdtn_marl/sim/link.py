@@ -220,11 +220,16 @@ class FadingWorkspace:
         return FadingWorkspace()  # scratch: nothing to copy
 
 
+def fading_width(links: int, subchannels: int) -> int:
+    """W = 3LM + L² + M fast-fading gains per scenario and subframe."""
+    return 3 * links * subchannels + links * links + subchannels
+
+
 def fading_buffer(
     workspace: FadingWorkspace, batch: int, width: int, subframes: int, like: torch.Tensor,
     fading_draws: str,
 ) -> torch.Tensor:  # fmt: skip
-    """The buffer the link-major path draws an interval's fading into: the normals
+    """The buffer the torch path draws an interval's fading into: the normals
     ``[2, T, B, W]``, or the Exp(1) gains ``[T, W, B]`` (``fading_draws="exponential"``)."""
     if fading_draws == "exponential":
         return workspace.get("exponential", (subframes, width, batch), like)
@@ -369,7 +374,7 @@ def build_interval_tables(
     cross_ls = v2v_lin[:, tx][:, :, rx].swapaxes(1, 2)  # [B, L_rx, L_tx]
     cross_ls = cross_ls * off_diagonal
     v2i_signal_ls = v2i_lin[:, v2i_user] * v2i_power_mw  # [B, M]
-    width = 3 * links * subch + links * links + subch
+    width = fading_width(links, subch)
     if fading_draws not in FADING_DRAWS:
         raise ValueError(f"fading_draws={fading_draws!r} must be one of {FADING_DRAWS}")
     if link_major(b, numpy):
@@ -481,7 +486,6 @@ def _build_tables_link_major(
     if drawn is None:
         drawn = fading_buffer(workspace, b, width, t, own_ls, fading_draws)
         draw_fading(drawn, generator, fading_draws)
-    normals = drawn
     for t0 in range(0, t, chunk):
         t1 = min(t, t0 + chunk)
         c = t1 - t0
@@ -491,7 +495,7 @@ def _build_tables_link_major(
             # |h|² = (x² + y²)/2 for the chunk, in place in the draws [C, B, W], then
             # link-major [C, W, B] (one transposing copy: elementwise operations that
             # transpose as they go cost torch several times more)
-            x, y = normals[0, t0:t1], normals[1, t0:t1]
+            x, y = drawn[0, t0:t1], drawn[1, t0:t1]
             x.mul_(x).add_(y.mul_(y)).mul_(0.5)
             fading = workspace.get("fading", (chunk, width, b), own_ls)[:c]
             fading.copy_(x.transpose(1, 2))

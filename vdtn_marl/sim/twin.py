@@ -229,9 +229,11 @@ class DigitalTwin:
         if lookahead_intervals < 0:
             raise ConfigError(f"lookahead_intervals={lookahead_intervals!r} must be >= 0")
         self.batch_size = int(batch_size)
+        if not isinstance(draw_ahead, bool):
+            raise ConfigError(f"draw_ahead={draw_ahead!r} must be True or False")
         #: whether the next interval's draws are made on a second thread (see the class doc)
         self.draw_ahead = (
-            bool(draw_ahead)
+            draw_ahead
             and backend == "torch"
             and self.device.type == "cpu"
             and self.batch_size >= link.DRAW_AHEAD_MIN_BATCH
@@ -425,11 +427,10 @@ class DigitalTwin:
             v2i_sum,
         )
         if self.draw_ahead:  # the next interval's draws, while this one's subframes run
-            n, width = self.params.platoon.num_vehicles, self._fading_width()
-            fading = link.fading_buffer(
-                self._workspace, b, width, t, self._time_left, self.fading_draws
+            n = self.params.platoon.num_vehicles
+            self._workspace.ahead = link.DrawAhead(
+                self.generator, b, n, self._fading_buffer(), self.fading_draws
             )
-            self._workspace.ahead = link.DrawAhead(self.generator, b, n, fading, self.fading_draws)
 
     def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
@@ -443,16 +444,8 @@ class DigitalTwin:
         ahead, self._workspace.ahead = self._workspace.ahead, None
         draws = None if ahead is None else ahead.take(g)
         if draws is None:
-            fading = None  # NumPy: build_interval_tables draws it, as NumPy arrays
-            if not ns.numpy:
-                fading = link.fading_buffer(
-                    self._workspace,
-                    self.batch_size,
-                    self._fading_width(),
-                    self.subframes_per_interval,
-                    self._time_left,
-                    self.fading_draws,
-                )
+            # NumPy: build_interval_tables draws the fading itself, as NumPy arrays
+            fading = None if ns.numpy else self._fading_buffer()
             draws = link.draw_interval(g, self.batch_size, n, fading, self.fading_draws)
         v2v_innovation, v2i_innovation, drawn = draws
         self._v2v_shadow_db = v2v_shadow = channel.shadowing_update_db(
@@ -491,10 +484,17 @@ class DigitalTwin:
             drawn=drawn,
         )
 
-    def _fading_width(self) -> int:
-        """W = 3LM + L² + M fading gains per scenario and subframe."""
-        links, subch = self.num_links, self.num_subchannels
-        return 3 * links * subch + links * links + subch
+    def _fading_buffer(self) -> torch.Tensor:
+        """The workspace buffer an interval's fading is drawn into (torch backend)."""
+        width = link.fading_width(self.num_links, self.num_subchannels)
+        return link.fading_buffer(
+            self._workspace,
+            self.batch_size,
+            width,
+            self.subframes_per_interval,
+            self._time_left,
+            self.fading_draws,
+        )
 
     def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,

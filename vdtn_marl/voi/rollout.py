@@ -123,9 +123,10 @@ def _rollout(
     fused: bool = True,
 ):
     """:func:`discounted_rollout` on torch tensors or NumPy arrays (all inputs alike): the
-    twin's own integrator, the CACC law and the control reward, so there is one copy of the
-    physics. Returns (returns [R, F], final state, alive [R]: 1 where no collision ended the
-    row). NumPy arrays with the linear CACC take :func:`_cacc_rollout_numpy` (``fused``)."""
+    twin's own integrator, the CACC law and the control reward. Returns (returns [R, F],
+    final state, alive [R]: 1 where no collision ended the row). NumPy arrays with the linear
+    CACC take :func:`_cacc_rollout_numpy` (``fused``), the one written-out copy of these
+    steps, tested bit for bit against this loop (``fused=False``)."""
     if fused and isinstance(interval, np.ndarray) and _is_linear_cacc(policy):
         return _cacc_rollout_numpy(
             twin, state, interval, policy, horizon_intervals, discount,
