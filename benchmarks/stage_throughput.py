@@ -26,9 +26,10 @@ samples per iteration of ``experiment=paper`` (B × rollout steps = 64 × 400 fo
 
 Cells run ``--repeats`` times, interleaved (every cell, then every cell again); the table
 reports medians and, per stage, the median over repeats of each size's frames/s divided by the
-reference size's (the current ``experiment=paper`` sizes) measured in the same repeat. The
-estimate of one ``experiment=paper`` JOCC iteration adds the chosen sizes' median seconds:
-warm start + scaling fits + 500 π* + 500 π̃ + 300 RRA iterations + evaluation + checkpoints.
+reference size's (the ``experiment=paper`` sizes, read from its config) measured in the same
+repeat. The estimate of one ``experiment=paper`` JOCC iteration adds the chosen sizes' median
+seconds: warm start + scaling fits + 500 π* + 500 π̃ + 300 RRA iterations + evaluation +
+checkpoints; a second estimate does the same at the ``paper`` sizes, where they were measured.
 The JSON keeps every run with the load average before and after; other processes on the cores
 slow every figure.
 """
@@ -53,7 +54,6 @@ CONTROL_STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned")
 #: 64 scenarios × 400 intervals (vehicles), 128 scenarios × 500 subframes (RRA agents)
 CONTROL_FRAMES = 64 * 400
 RRA_FRAMES = 128 * 500
-REFERENCE = {"control": 64, "rra": 128}
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -372,6 +372,13 @@ def _budgets() -> dict:
     }
 
 
+def reference_batches(budgets: dict) -> dict[str, int]:
+    """The ``experiment=paper`` batch sizes: the reference of the ratios, and the sizes of the
+    second estimate."""
+    algo = budgets["paper_algo"]
+    return {"control": int(algo["num_envs"]), "rra": int(algo["rra_num_envs"])}
+
+
 def _fmt(value, spec=",.0f"):
     return "–" if value is None else format(value, spec)
 
@@ -411,11 +418,12 @@ def main(argv=None) -> int:
                 f"(load {result['load_average_1min_before']:.2f})",
                 flush=True,
             )
+    budgets = _budgets()
+    reference = reference_batches(budgets)
     rows = []
     for stage in args.stages:
-        reference = REFERENCE["rra" if stage == "rra" else "control"]
-        rows += summarise(stage, [r for r in runs if r["stage"] == stage], reference)
-    budgets = _budgets()
+        size = reference["rra" if stage == "rra" else "control"]
+        rows += summarise(stage, [r for r in runs if r["stage"] == stage], size)
     chosen = _choice(args, rows)
     result = {
         **provenance("stage_throughput"),
@@ -424,10 +432,12 @@ def main(argv=None) -> int:
         "cpu_count": os.cpu_count(),
         "control_frames_per_iteration": CONTROL_FRAMES,
         "rra_frames_per_iteration": RRA_FRAMES,
-        "reference_batches": REFERENCE,
+        "reference_batches": reference,
         "rows": rows,
         "estimate": estimate(rows, chosen, budgets),
         "estimate_cpu": estimate(rows, chosen, budgets, cpu=True),
+        "estimate_paper": estimate(rows, reference, budgets),
+        "estimate_paper_cpu": estimate(rows, reference, budgets, cpu=True),
         "complete": True,
         "peak_rss_mb": max(r["peak_rss_mb"] for r in runs),
         "runs": runs,
@@ -454,7 +464,12 @@ def main(argv=None) -> int:
                 f"{'':>8} {'':>6} {'':>8} {'':>9} {row['peak_rss_mb']:>7.0f}"
                 f"   ({row['cpu_seconds']:.1f} CPU s)"
             )
-    for name, label in (("estimate", "wall"), ("estimate_cpu", "CPU")):
+    for name, label in (
+        ("estimate", "wall"),
+        ("estimate_cpu", "CPU"),
+        ("estimate_paper", "wall, the paper sizes"),
+        ("estimate_paper_cpu", "CPU, the paper sizes"),
+    ):
         est = result[name]
         print(
             f"\nexperiment=paper, one JOCC iteration at {est['chosen_batches']} ({label} s): "

@@ -273,3 +273,16 @@ def test_draw_ahead_refuses_bad_arguments(capsys):
     with pytest.raises(SystemExit):
         draw_ahead.parse_args(["--repeats", "0"])
     assert "--repeats" in capsys.readouterr().err
+
+
+def test_the_reference_sizes_are_the_paper_configs_and_fit_the_sweep():
+    budgets = stages._budgets()
+    reference = stages.reference_batches(budgets)
+    assert reference == {
+        "control": budgets["paper_algo"]["num_envs"],
+        "rra": budgets["paper_algo"]["rra_num_envs"],
+    }
+    # the paper sizes keep the samples per iteration the sweep compares at
+    algo = budgets["paper_algo"]
+    assert algo["num_envs"] * algo["rollout_steps"] == stages.CONTROL_FRAMES
+    assert algo["rra_num_envs"] * algo["rra_rollout_steps"] == stages.RRA_FRAMES
