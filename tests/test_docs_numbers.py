@@ -79,3 +79,28 @@ def test_performance_page_quotes_the_side_by_side_run_as_generated():
             f"{r['at_start_over_ahead']:.2f} ({r['ratio_min']:.2f}–{r['ratio_max']:.2f}) |"
         )
         assert quoted in page, quoted
+
+
+def test_performance_page_quotes_the_stage_sweep_as_generated():
+    """docs/performance.md's batch-size table and iteration estimates come from the committed
+    JSON of benchmarks/stage_throughput.py."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    sweep = json.loads((ROOT / "benchmarks/results/stage_throughput.json").read_text())
+    rows = [r for r in sweep["rows"] if "frames_per_s" in r]
+    assert rows
+    for r in rows:
+        quoted = (
+            f"{r['batch']} × {r['rollout_steps']} | {r['frames_per_s']:,.0f} | "
+            f"{r['seconds_per_iteration']:.2f} | {r['update_s']:.2f} | "
+            f"{r['ratio_to_reference']:.2f} | {r['cpu_ratio_to_reference']:.2f} | "
+            f"{r['peak_rss_mb']:,.0f} |"
+        )
+        assert quoted in page, quoted
+    paper, best = sweep["estimate_paper"], sweep["estimate"]
+    quoted = (
+        f"at the `paper` sizes {paper['first_iteration_min']:.1f} min (first) and "
+        f"{paper['later_iteration_min']:.1f} min (later), at the fastest sizes measured "
+        f"({best['chosen_batches']['control']} × "
+    )
+    assert quoted in page, quoted
+    assert f"{best['first_iteration_min']:.1f} and {best['later_iteration_min']:.1f} min" in page
