@@ -445,7 +445,7 @@ def main(argv=None) -> int:
     print()
     print(
         f"{'stage':<17} {'B':>5} {'steps':>6} {'frames/s':>9} {'collect f/s':>11} "
-        f"{'s/iter':>7} {'update s':>8} {'× ref':>6} {'f/cpu-s':>8} {'cpu × ref':>9} "
+        f"{'s/iter':>7} {'update s':>8} {'× paper':>7} {'f/cpu-s':>8} {'cpu × paper':>11} "
         f"{'RSS MB':>7}"
     )
     for row in rows:
@@ -454,25 +454,25 @@ def main(argv=None) -> int:
                 f"{row['stage']:<17} {row['batch']:>5} {row['rollout_steps']:>6} "
                 f"{_fmt(row['frames_per_s']):>9} {_fmt(row['collect_frames_per_s']):>11} "
                 f"{row['seconds_per_iteration']:>7.2f} {row['update_s']:>8.2f} "
-                f"{_fmt(row['ratio_to_reference'], '.2f'):>6} "
+                f"{_fmt(row['ratio_to_reference'], '.2f'):>7} "
                 f"{_fmt(row['frames_per_cpu_s']):>8} "
-                f"{_fmt(row['cpu_ratio_to_reference'], '.2f'):>9} {row['peak_rss_mb']:>7.0f}"
+                f"{_fmt(row['cpu_ratio_to_reference'], '.2f'):>11} {row['peak_rss_mb']:>7.0f}"
             )
         else:
             print(
                 f"{row['stage']:<17} {'':>5} {'':>6} {'':>9} {'':>11} {row['seconds']:>7.1f} "
-                f"{'':>8} {'':>6} {'':>8} {'':>9} {row['peak_rss_mb']:>7.0f}"
+                f"{'':>8} {'':>7} {'':>8} {'':>11} {row['peak_rss_mb']:>7.0f}"
                 f"   ({row['cpu_seconds']:.1f} CPU s)"
             )
     for name, label in (
-        ("estimate", "wall"),
-        ("estimate_cpu", "CPU"),
-        ("estimate_paper", "wall, the paper sizes"),
-        ("estimate_paper_cpu", "CPU, the paper sizes"),
+        ("estimate", "wall s"),
+        ("estimate_cpu", "CPU s"),
+        ("estimate_paper", "wall s, the paper sizes"),
+        ("estimate_paper_cpu", "CPU s, the paper sizes"),
     ):
         est = result[name]
         print(
-            f"\nexperiment=paper, one JOCC iteration at {est['chosen_batches']} ({label} s): "
+            f"\nexperiment=paper, one JOCC iteration at {est['chosen_batches']} ({label}): "
             f"first {est['first_iteration_min']:.1f} min, later "
             f"{est['later_iteration_min']:.1f} min (missing: "
             f"{', '.join(est['missing']) or 'none'})"
