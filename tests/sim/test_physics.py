@@ -485,6 +485,39 @@ def test_link_major_kernel_equals_the_batched_formulation_bit_for_bit(vehicles, 
     assert checked > 0
 
 
+@pytest.mark.parametrize(
+    "vehicles,subchannels,batch", [(4, 4, 1), (8, 2, 1), (6, 3, 5), (9, 1, 2), (4, 12, 3)]
+)
+def test_numpy_kernel_equals_the_dense_formulation_bit_for_bit(vehicles, subchannels, batch):
+    """The NumPy kernel (fewer calls) gives the dense [B, L, M] code's numbers and state bit
+    for bit: links that send, that are silent (the off level), and that delivered already."""
+    params = TwinParams.from_overrides(num_vehicles=vehicles, num_subchannels=subchannels)
+    twin = DigitalTwin(params, batch_size=batch, seed=12, backend="numpy")
+    rng = np.random.default_rng(4)
+    outcomes = {"delivered": 0, "silent": 0, "sending": 0}
+    for t in range(twin.subframes_per_interval):
+        actions = rng.integers(0, params.radio.num_actions, (batch, twin.num_links))
+        start = twin.link_state
+        # some CAMs delivered already, the others with any number of bits left
+        scale = rng.uniform(-0.3, 1.0, start.remaining_bits.shape).astype(np.float32)
+        start.remaining_bits = start.remaining_bits * scale
+        states = [dataclasses.replace(start) for _ in range(2)]
+        args = (twin.tables, t, actions)
+        want = link._subframe_step_dense(*args, states[0], twin._decode, twin._const)
+        got = link._subframe_step_numpy(*args, states[1], twin._decode, twin._const)
+        for a, b in [
+            *zip(dataclasses.astuple(want), dataclasses.astuple(got), strict=True),
+            *zip(dataclasses.astuple(states[0]), dataclasses.astuple(states[1]), strict=True),
+        ]:
+            assert a.dtype == b.dtype and a.shape == b.shape
+            assert a.tobytes() == b.tobytes()
+        outcomes["delivered"] += int((~got.was_pending).sum())
+        outcomes["silent"] += int((got.was_pending & (got.v2v_power_mw == 0)).sum())
+        outcomes["sending"] += int((got.v2v_power_mw > 0).sum())
+        twin.step_subframe(actions)
+    assert min(outcomes.values()) > 0, outcomes
+
+
 def test_exponential_fading_draws_have_the_rayleigh_law_and_reproduce_by_seed():
     """fading_draws="exponential": |h|² ~ Exp(1) (mean 1, variance 1, P(|h|² > 2) = e⁻²),
     the same tables on both backends and for the same seed, other numbers than "normal"."""

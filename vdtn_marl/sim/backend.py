@@ -17,6 +17,7 @@ import dataclasses
 from collections.abc import Iterator
 from contextlib import contextmanager, nullcontext
 from functools import lru_cache
+from types import SimpleNamespace
 from typing import TypeAlias
 
 import numpy as np
@@ -60,6 +61,17 @@ def clamp(x: Array, low: float | None = None, high: float | None = None) -> Arra
             x = np.minimum(x, high)
         return x
     return x.clamp(low, high)
+
+
+def float32_scalars(**values: float) -> SimpleNamespace:
+    """``values`` as read-only float32 0-d arrays, for NumPy code on float32 arrays: the same
+    operations as with the Python numbers (NumPy casts a Python scalar to the array's dtype
+    first), at about a third of NumPy's cost per call on arrays of a few entries."""
+    arrays = {}
+    for name, value in values.items():
+        array = arrays[name] = np.array(value, np.float32)
+        array.flags.writeable = False
+    return SimpleNamespace(**arrays)
 
 
 def _torch_on_numpy(x: np.ndarray, fn) -> np.ndarray:

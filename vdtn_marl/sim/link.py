@@ -24,11 +24,12 @@ import math
 import threading
 from dataclasses import dataclass, fields, replace
 from functools import cache, lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 
-from vdtn_marl.sim.backend import Array, cat, clamp, log10, sum_axis
+from vdtn_marl.sim.backend import Array, cat, clamp, float32_scalars, log10, sum_axis
 from vdtn_marl.sim.channel import (
     FADING_DRAWS,
     db_to_linear,
@@ -565,6 +566,13 @@ class KernelConstants:
             subchannels=torch.arange(radio.num_subchannels, device=device)[:, None],
         )
 
+    @property
+    def float32(self) -> SimpleNamespace:
+        """The NumPy kernel's scalars as read-only float32 0-d arrays: on float32 arrays the
+        same operations as with the Python numbers (NumPy casts a Python scalar to the
+        array's dtype first), at a third of NumPy's cost per call."""
+        return _kernel_float32(self.noise_mw, self.bandwidth_hz, self.subframe_s)
+
     def numpy(self) -> KernelConstants:
         arrays = {
             f.name: getattr(self, f.name).cpu().numpy()
@@ -572,6 +580,17 @@ class KernelConstants:
             if isinstance(getattr(self, f.name), torch.Tensor)
         }
         return replace(self, **arrays)
+
+
+@lru_cache(maxsize=16)
+def _kernel_float32(noise_mw: float, bandwidth_hz: float, subframe_s: float) -> SimpleNamespace:
+    # positive numbers: the cache's key (equal values share an entry) loses no zero's sign
+    return float32_scalars(
+        zero=0.0,
+        noise_mw=noise_mw,
+        v2v_bits_per_nat=bandwidth_hz * subframe_s / math.log(2.0),
+        v2i_bps_per_nat=bandwidth_hz / math.log(2.0),
+    )
 
 
 def subframe_step(
@@ -597,11 +616,20 @@ def subframe_step(
     single-scenario path's own numbers: in about 0.4 % of the subframes in which two
     interferers share a receiver's sub-channel it differs from torch's in the last bit). On
     torch from :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
-    (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it this
-    function's own ``[B, L, M]`` code.
+    (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it the
+    ``[B, L, M]`` code (:func:`_subframe_step_dense`); on NumPy arrays that code with fewer
+    calls (:func:`_subframe_step_numpy`, bit for bit the same).
     """
-    if isinstance(actions, torch.Tensor) and link_major(actions.shape[0]):
+    if isinstance(actions, np.ndarray):
+        return _subframe_step_numpy(tables, subframe, actions, state, decode, const)
+    if link_major(actions.shape[0]):
         return _subframe_step_link_major(tables, subframe, actions, state, decode, const)
+    return _subframe_step_dense(tables, subframe, actions, state, decode, const)
+
+
+def _subframe_step_dense(tables, subframe, actions, state, decode, const) -> SubframeOutcome:
+    """:func:`subframe_step` in the ``[B, L, M]`` formulation, on either backend (torch
+    below :data:`LINK_MAJOR_MIN_BATCH` scenarios; the reference of the NumPy kernel)."""
     xp = np if isinstance(actions, np.ndarray) else torch
     pending = state.remaining_bits > 0
     channel = decode.subchannel[actions]  # [B, L]
@@ -628,6 +656,39 @@ def subframe_step(
     state.delay_subframes = xp.where(delivered_now, subframe + 1, state.delay_subframes)
     state.occupancy = sum_axis(tx_onehot, 1)
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
+
+
+def _subframe_step_numpy(tables, subframe, actions, state, decode, const) -> SubframeOutcome:
+    """:func:`subframe_step` on NumPy arrays: the ``[B, L, M]`` code with fewer NumPy calls
+    (at B = 1 the cost of each call, not its arithmetic, is the kernel's time), the same
+    float32 operations on the same operands, so the same numbers bit for bit (tested against
+    the ``[B, L, M]`` code, tests/sim/test_physics.py). The sender's power on its sub-channel
+    is ``onehot · power`` (``power`` is 0 for a silent link, so the ``(power > 0)`` mask of
+    the general code multiplies by 1 or meets a 0 already there); occupancy counts its
+    non-zero entries; the scalars are float32 0-d arrays (:attr:`KernelConstants.float32`)."""
+    c = const.float32
+    pending = state.remaining_bits > c.zero
+    channel = decode.subchannel.take(actions)  # [B, L]
+    power = decode.power_mw.take(actions) * pending  # [B, L]
+    power_onehot = decode.onehot.take(actions, 0) * power[..., None]  # [B, L, M]
+    flat = const.row_offset + channel
+    own = tables.own_gain[subframe].take(flat)
+    from_v2i = tables.v2i_to_rx_mw[subframe].take(flat)
+    from_v2v = np.matmul(tables.cross_gain[subframe], power_onehot).take(flat)
+    v2v_sinr = power * own / (c.noise_mw + from_v2i + from_v2v)
+    v2v_bits = np.log1p(v2v_sinr) * c.v2v_bits_per_nat
+    bs_interference = _add_reduce(power_onehot * tables.tx_to_bs_gain[subframe], 1)  # [B, M]
+    v2i_sinr = tables.v2i_signal_mw[subframe] / (c.noise_mw + bs_interference)
+    v2i_rate = np.log1p(v2i_sinr) * c.v2i_bps_per_nat
+    remaining = state.remaining_bits - v2v_bits
+    delivered_now = pending & (remaining <= c.zero)
+    state.remaining_bits = remaining
+    state.delay_subframes = np.where(delivered_now, subframe + 1, state.delay_subframes)
+    state.occupancy = _add_reduce(power_onehot > c.zero, 1, dtype=np.float32)
+    return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
+
+
+_add_reduce = np.add.reduce
 
 
 def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -> SubframeOutcome:

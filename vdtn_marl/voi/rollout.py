@@ -4,13 +4,16 @@ the IVoI estimators and the value fit build on."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
+from functools import lru_cache
+from types import SimpleNamespace
 
 import numpy as np
 import torch
 
 from vdtn_marl.policies.cacc import CACCController
-from vdtn_marl.sim.backend import as_float, repeat_rows, to_numpy, to_torch
+from vdtn_marl.sim.backend import as_float, float32_scalars, repeat_rows, to_numpy, to_torch
 from vdtn_marl.sim.platoon import (
     GAP_ERROR_BOUND_M,
     SPEED_ERROR_BOUND_MPS,
@@ -127,7 +130,13 @@ def _rollout(
     final state, alive [R]: 1 where no collision ended the row). NumPy arrays with the linear
     CACC take :func:`_cacc_rollout_numpy` (``fused``), the one written-out copy of these
     steps, tested bit for bit against this loop (``fused=False``)."""
-    if fused and isinstance(interval, np.ndarray) and _is_linear_cacc(policy):
+    if (
+        fused
+        and isinstance(interval, np.ndarray)
+        and _is_linear_cacc(policy)
+        and state.position_m.dtype == np.float32  # the written-out copy's arrays
+        and (first_command is None or first_command.dtype == np.float32)
+    ):
         return _cacc_rollout_numpy(
             twin, state, interval, policy, horizon_intervals, discount,
             first_command, first_switch, stop_at_episode_end,
@@ -175,7 +184,7 @@ def _rollout(
         if stop_at_episode_end:
             inside = as_float(interval + h < twin.params.episode_intervals)[:, None]
             reward = reward * inside
-        returns = returns + weight * (reward * alive[:, None])
+        returns = returns + np.float32(weight) * (reward * alive[:, None])
         alive = alive * as_float(~collided.any(-1))
         weight *= discount
         state = after
@@ -206,31 +215,65 @@ def _cacc_rollout_numpy(
     fi, pi, li = rows_of.follower_index, rows_of.predecessor_index, rows_of.leader_index
     phi, gain = twin.integrator.numpy_matrices()
     t = pp.subframes_per_interval
-    lo, hi = pp.accel_min_mps2, pp.accel_max_mps2
-    top_lo, top_hi = policy.params.accel_min_mps2, policy.params.accel_max_mps2
-    length, standstill, headway = pp.vehicle_length_m, pp.standstill_gap_m, pp.time_headway_s
-    interval_s = pp.control_interval_s
-    leader_pos_gain = twin.integrator.leader_pos_gain
+    # every constant as a float32 0-d array: on float32 arrays the same operation as with the
+    # Python number (NumPy casts a Python scalar to the array's dtype first), at a third of
+    # NumPy's cost per call
+    c = _float32_constants(
+        lo=pp.accel_min_mps2,
+        hi=pp.accel_max_mps2,
+        top_lo=policy.params.accel_min_mps2,
+        top_hi=policy.params.accel_max_mps2,
+        gap_gain=policy.gap_gain,
+        speed_gain=policy.speed_gain,
+        feedforward_gain=policy.feedforward_gain,
+        accel_gain=policy.accel_gain,
+        gap_lo=-GAP_ERROR_BOUND_M,
+        gap_hi=GAP_ERROR_BOUND_M,
+        speed_lo=-SPEED_ERROR_BOUND_MPS,
+        speed_hi=SPEED_ERROR_BOUND_MPS,
+        length=pp.vehicle_length_m,
+        standstill=pp.standstill_gap_m,
+        headway=pp.time_headway_s,
+        interval_s=pp.control_interval_s,
+        leader_pos_gain=twin.integrator.leader_pos_gain,
+        gap_scale=pp.gap_error_scale_m,
+        weight_speed=pp.weight_speed,
+        speed_scale=pp.speed_error_scale_mps,
+        weight_accel=pp.weight_accel,
+        accel_max=pp.accel_max_mps2,
+        weight_jerk=pp.weight_jerk,
+        jerk_max=pp.jerk_max_mps3,
+        collision_penalty=pp.collision_penalty,
+        zero=0.0,
+    )
+    lo, hi, top_lo, top_hi = c.lo, c.hi, c.top_lo, c.top_hi
+    length, standstill, headway, interval_s = c.length, c.standstill, c.headway, c.interval_s
+    zero = c.zero
     maximum, minimum, absolute = np.maximum, np.minimum, np.absolute
     rows = interval.shape[0]
-    f = twin.num_followers
+    f, n = twin.num_followers, state.position_m.shape[1]
     leader = repeat_rows(
         twin.leader_accel_mps2(interval[: twin.batch_size, None] + np.arange(horizon_intervals)),
         rows // twin.batch_size,
     )  # [R, H, Λ]
-    position, speed, accel = state.position_m, state.speed_mps, state.accel_mps2
-    command = state.command_mps2
+    # the state as one float32 array [R, N, 4] (position, speed, acceleration, command): a
+    # follower's integrator state z [R, F, 3] is a view of it, the next state one array
+    s = np.empty((rows, n, 4), np.float32)
+    s[..., 0], s[..., 1] = state.position_m, state.speed_mps
+    s[..., 2], s[..., 3] = state.accel_mps2, state.command_mps2
     returns = np.zeros((rows, f), np.float32)
     alive = np.ones(rows, np.float32)
     g_all = gain[t]
+    phi_p, phi_v, phi_a = phi[:, 0], phi[:, 1], phi[:, 2]
 
-    def errors(position, speed):  # gaps_m and spacing_errors
-        follower_speed = speed[:, fi]
-        gap = position[:, pi] - position[:, fi] - length
+    def errors(s):  # gaps_m and spacing_errors, on the follower and predecessor rows
+        ahead, behind = s[:, pi], s[:, fi]
+        follower_speed = behind[..., 1]
+        gap = ahead[..., 0] - behind[..., 0] - length
         gap_error = gap - (standstill + headway * follower_speed)
-        return gap, gap_error, speed[:, pi] - follower_speed
+        return ahead, behind, gap, gap_error, ahead[..., 1] - follower_speed
 
-    _, gap_error, speed_error = errors(position, speed)
+    ahead, behind, _, gap_error, speed_error = errors(s)
     weight = 1.0
     for h in range(horizon_intervals):
         g_new = g_all
@@ -240,48 +283,60 @@ def _cacc_rollout_numpy(
                 g_new = gain[t - first_switch]
         else:  # CACCController.perfect_command
             u = (
-                policy.gap_gain * minimum(maximum(gap_error, -GAP_ERROR_BOUND_M), GAP_ERROR_BOUND_M)
-                + policy.speed_gain
-                * minimum(maximum(speed_error, -SPEED_ERROR_BOUND_MPS), SPEED_ERROR_BOUND_MPS)
-                + policy.feedforward_gain * minimum(maximum(command[:, pi], lo), hi)
-                - policy.accel_gain * minimum(maximum(accel[:, fi], lo), hi)
+                c.gap_gain * minimum(maximum(gap_error, c.gap_lo), c.gap_hi)
+                + c.speed_gain * minimum(maximum(speed_error, c.speed_lo), c.speed_hi)
+                + c.feedforward_gain * minimum(maximum(ahead[..., 3], lo), hi)
+                - c.accel_gain * minimum(maximum(behind[..., 2], lo), hi)
             )
             u = minimum(maximum(u, top_lo), top_hi)
         # IntervalIntegrator.integrate
         u_new = minimum(maximum(u, lo), hi)
-        u_old = command[:, fi]
-        z = np.empty((rows, f, 3), np.float32)
-        z[..., 0], z[..., 1], z[..., 2] = position[:, fi], speed[:, fi], accel[:, fi]
-        z_phi = z[..., 0:1] * phi[:, 0] + z[..., 1:2] * phi[:, 1] + z[..., 2:3] * phi[:, 2]
-        z = z_phi + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
+        u_old = behind[..., 3]
+        step = u_new - u_old
+        z = behind[..., 0:1] * phi_p + behind[..., 1:2] * phi_v + behind[..., 2:3] * phi_a
+        z = z + g_all * u_old[..., None] + g_new * step[..., None]
         lead_accel = leader[:, h]
-        lead_v = speed[:, li]
-        lead_p = position[:, li] + interval_s * lead_v + leader_pos_gain * lead_accel
-        lead_v = maximum(lead_v + interval_s * lead_accel, 0.0)
-        position, speed = np.empty_like(position), np.empty_like(speed)
-        accel, command = np.empty_like(accel), np.empty_like(command)
-        position[:, li], position[:, fi] = lead_p, z[..., 0]
-        speed[:, li], speed[:, fi] = lead_v, maximum(z[..., 1], 0.0)
-        accel[:, li], accel[:, fi] = lead_accel, z[..., 2]
-        command[:, li], command[:, fi] = lead_accel, u_new
+        lead = s[:, li]
+        lead_v = lead[..., 1]
+        lead_p = lead[..., 0] + interval_s * lead_v + c.leader_pos_gain * lead_accel
+        lead_v = maximum(lead_v + interval_s * lead_accel, zero)
+        s = np.empty((rows, n, 4), np.float32)
+        s[:, fi, :3] = z
+        s[:, fi, 1] = maximum(z[..., 1], zero)
+        s[:, fi, 3] = u_new
+        s[:, li, 0], s[:, li, 1] = lead_p, lead_v
+        s[:, li, 2:] = lead_accel[..., None]  # the leader's acceleration and command
         # control_reward, the collision and the discounted sum, as in _rollout
-        gap, gap_error, speed_error = errors(position, speed)
-        jerk = (u_new - u_old) / interval_s
+        ahead, behind, gap, gap_error, speed_error = errors(s)
+        jerk = step / interval_s
         reward = -(
-            absolute(gap_error) / pp.gap_error_scale_m
-            + pp.weight_speed * absolute(speed_error) / pp.speed_error_scale_mps
-            + pp.weight_accel * absolute(u_new) / pp.accel_max_mps2
-            + pp.weight_jerk * absolute(jerk) / pp.jerk_max_mps3
+            absolute(gap_error) / c.gap_scale
+            + c.weight_speed * absolute(speed_error) / c.speed_scale
+            + c.weight_accel * absolute(u_new) / c.accel_max
+            + c.weight_jerk * absolute(jerk) / c.jerk_max
         )
-        collided = gap <= 0
-        reward = reward + collided.astype(np.float32) * pp.collision_penalty
+        collided = gap <= zero
+        reward = reward + collided.astype(np.float32) * c.collision_penalty
         if stop_at_episode_end:
             inside = (interval + h < twin.params.episode_intervals).astype(np.float32)[:, None]
             reward = reward * inside
-        returns = returns + weight * (reward * alive[:, None])
+        returns = returns + np.float32(weight) * (reward * alive[:, None])
         alive = alive * (~np.logical_or.reduce(collided, axis=-1)).astype(np.float32)
         weight *= discount
-    return returns, PlatoonState(position, speed, accel, command), alive
+    final = PlatoonState(*(np.ascontiguousarray(s[..., k]) for k in range(4)))
+    return returns, final, alive
+
+
+def _float32_constants(**values) -> SimpleNamespace:
+    """``values`` (Python numbers) as float32 0-d arrays, for :func:`_cacc_rollout_numpy`
+    (read only; the same object for the same values)."""
+    # each value's sign in the key: 0.0 and -0.0 are equal keys but not the same number
+    return _float32_namespace(tuple((k, v, math.copysign(1.0, v)) for k, v in values.items()))
+
+
+@lru_cache(maxsize=64)
+def _float32_namespace(items: tuple) -> SimpleNamespace:
+    return float32_scalars(**{name: value for name, value, _ in items})
 
 
 class RolloutValue:
