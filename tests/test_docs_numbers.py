@@ -55,23 +55,25 @@ def test_readme_quotes_pi_stars_gap_to_the_oracle_as_generated():
 
 
 def test_performance_page_quotes_the_side_by_side_run_as_generated():
-    """docs/performance.md's side-by-side table and the draws-ahead table come from the
-    committed JSONs of benchmarks/throughput.py and benchmarks/draw_ahead.py."""
+    """docs/performance.md's side-by-side tables (two machines) and the draws-ahead table come
+    from the committed JSONs of benchmarks/throughput.py and benchmarks/draw_ahead.py."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
-    side = json.loads((ROOT / "benchmarks/results/throughput_peer_liang.json").read_text())
-    rows = {r["name"]: r for r in side["results"]}
-    for name, digits in (
-        ("TwoTimescaleEnv kappa1=0.5 (rollout VoI)", 2),
-        ("DigitalTwin B=4096 torch/cpu", 0),
-        ("DigitalTwin B=4096 torch/cpu, draw-ahead off", 0),
-    ):
-        r = rows[name]
-        runs = r["peer_ratio_runs"]
-        quoted = (
-            f"{r['agent_steps_per_s']:,.0f} | {r['peer_ratio']:.{digits}f} "
-            f"({min(runs):.{digits}f}–{max(runs):.{digits}f}) |"
-        )
-        assert quoted in page, quoted
+    for file in ("throughput_peer_liang.json", "throughput_peer_liang_epyc.json"):
+        side = json.loads((ROOT / "benchmarks/results" / file).read_text())
+        assert f"`benchmarks/results/{file}`" in page
+        rows = {r["name"]: r for r in side["results"]}
+        for name, digits in (
+            ("TwoTimescaleEnv kappa1=0.5 (rollout VoI)", 2),
+            ("DigitalTwin B=4096 torch/cpu", 0),
+            ("DigitalTwin B=4096 torch/cpu, draw-ahead off", 0),
+        ):
+            r = rows[name]
+            runs = r["peer_ratio_runs"]
+            quoted = (
+                f"{r['agent_steps_per_s']:,.0f} | {r['peer_ratio']:.{digits}f} "
+                f"({min(runs):.{digits}f}–{max(runs):.{digits}f}) |"
+            )
+            assert quoted in page, (file, quoted)
     ahead = json.loads((ROOT / "benchmarks/results/draw_ahead.json").read_text())
     for r in ahead["rows"]:
         quoted = (
