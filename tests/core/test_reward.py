@@ -90,3 +90,19 @@ def test_the_aoi_reward_is_paid_to_the_link_whose_recipient_it_measures():
             first = s if delay[0] <= s else 50.0 + s
             assert rewards["rra_1"] == pytest.approx(-0.02 * first, rel=1e-5), (interval, s)
         assert delay[0] < T and (delay[1:] == T + 1).all()
+
+
+@pytest.mark.parametrize("scale", [0.004, np.float64(0.004)], ids=["float", "np.float64"])
+def test_numpy_throughput_term_is_the_general_formulas_bit_for_bit(scale):
+    """On float32 NumPy outcomes the throughput term takes float32 0-d constants (cheaper
+    calls) only for Python numbers: the numbers and dtype of κ1·s_g·g·1 either way."""
+    rng = np.random.default_rng(3)
+    rates = (rng.uniform(0.0, 5e6, (64, 4))).astype(np.float32)
+    bits = np.zeros((64, 3), np.float32)
+    outcome = SimpleNamespace(v2i_rate_bps=rates, v2v_bits=bits)
+    reward_fn = RRAReward("jocc", kappa1=0.3, throughput_scale=scale)
+    reward, g = reward_fn.per_subframe(outcome, 180e3, 1e-3)
+    want_g = rates.sum(axis=-1) * 1e-6
+    want = (reward_fn.kappa1 * reward_fn.throughput_scale) * want_g[:, None] * np.ones_like(bits)
+    for got, expected in ((g, want_g), (reward, want)):
+        assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()

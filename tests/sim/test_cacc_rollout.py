@@ -104,3 +104,29 @@ def test_only_numpy_arrays_and_the_linear_cacc_take_the_fused_loop(monkeypatch):
     assert calls == []
     rollout_module._rollout(twin, state.numpy(), to_numpy(interval), cacc, 3, 0.9)
     assert calls == [1]
+
+
+def test_a_numpy_scalar_gain_takes_the_general_loop_and_its_numbers():
+    """A NumPy float64 gain keeps its dtype in NumPy's arithmetic (a Python number takes the
+    array's float32): the written-out copy, whose constants are float32 0-d arrays, hands such
+    a rollout to the general loop, so both give its numbers."""
+    params = scenario_params("platoon", episode_intervals=12)
+    twin = DigitalTwin(params, batch_size=1, seed=5, backend="numpy")
+    twin.reset(seed=5)
+    record = _record(twin, CACCController(params.platoon), 2)
+    strong = CACCController(params.platoon, gap_gain=np.float64(0.45))
+    state, interval = record.state_before.numpy(), to_numpy(record.interval)
+    # spacing errors to act on: followers 0.3–3 m off their gaps
+    offset = np.random.default_rng(2).uniform(0.3, 3.0, state.position_m.shape)
+    state = PlatoonState(
+        (state.position_m + offset).astype(np.float32),
+        state.speed_mps,
+        state.accel_mps2,
+        state.command_mps2,
+    )
+    runs = [
+        rollout_module._rollout(twin, state, interval, strong, 4, 0.9, fused=fused)
+        for fused in (True, False)
+    ]
+    _assert_same(*runs)
+    assert runs[1][0].dtype == np.float64  # the general loop computed in float64

@@ -9,6 +9,7 @@ import torch
 
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import channel, link
+from vdtn_marl.sim.backend import float32_scalars
 from vdtn_marl.sim.params import ConfigError, PlatoonParams, RadioParams, TwinParams
 from vdtn_marl.sim.platoon import IntervalIntegrator, PlatoonState, spacing_errors
 from vdtn_marl.sim.twin import DigitalTwin
@@ -579,3 +580,19 @@ def test_link_major_twin_equals_the_batch_first_twin(monkeypatch, fading_draws):
     assert len(reference) == len(linked)
     for a, b in zip(reference, linked, strict=True):
         assert torch.equal(a, b)
+
+
+def test_numpy_kernel_with_numpy_scalar_constants_gives_the_dense_codes_numbers():
+    """Kernel constants that are NumPy float64 scalars keep their dtype in NumPy's arithmetic:
+    the NumPy kernel then runs the dense code, and backend.float32_scalars refuses them."""
+    assert float32_scalars(x=np.float64(0.5)) is None
+    assert float32_scalars(x=0.5, n=3).x.dtype == np.float32
+    twin = DigitalTwin(batch_size=1, seed=12, backend="numpy")
+    const = dataclasses.replace(twin._const, bandwidth_hz=np.float64(twin._const.bandwidth_hz))
+    actions = np.random.default_rng(5).integers(0, twin.params.radio.num_actions, (1, 3))
+    states = [dataclasses.replace(twin.link_state) for _ in range(2)]
+    want = link._subframe_step_dense(twin.tables, 0, actions, states[0], twin._decode, const)
+    got = link._subframe_step_numpy(twin.tables, 0, actions, states[1], twin._decode, const)
+    assert want.v2v_bits.dtype == np.float64  # float64 arithmetic, as the dense code does it
+    for a, b in zip(dataclasses.astuple(want), dataclasses.astuple(got), strict=True):
+        assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

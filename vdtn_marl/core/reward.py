@@ -62,7 +62,7 @@ def _float32(value: float, array: np.ndarray):
     """``value`` for an operation with ``array``: a float32 0-d array when ``array`` is float32
     (the same result as the Python number, which NumPy casts to float32 first, for a third of
     the cost of the call), else the number itself."""
-    if array.dtype != np.float32:
+    if array.dtype != np.float32 or type(value) not in (int, float):  # np.float64 stays strong
         return value
     key = (value, math.copysign(1.0, value))  # 0.0 and -0.0 apart
     cached = _FLOAT32.get(key)
@@ -123,11 +123,16 @@ class RRAReward:
         bits = outcome.v2v_bits
         numpy = isinstance(bits, np.ndarray)
         g = self.v2i_throughput_mbps(outcome)
-        if numpy:  # the same numbers as torch's `g · 1` below, by fewer and cheaper calls
-            reward = np.empty_like(bits)
-            reward[...] = _float32(self.kappa1 * self.throughput_scale, g) * g[:, None]
+        factor = self.kappa1 * self.throughput_scale
+        if numpy:
+            factor = _float32(factor, g)
+            if isinstance(factor, np.ndarray):  # the numbers of `g · 1`, by fewer, cheaper calls
+                reward = np.empty_like(bits)
+                reward[...] = factor * g[:, None]
+            else:
+                reward = factor * g[:, None] * np.ones_like(bits)
         else:
-            reward = (self.kappa1 * self.throughput_scale) * g[:, None] * bits.new_ones(bits.shape)
+            reward = factor * g[:, None] * bits.new_ones(bits.shape)
         if self.kind == "drra":
             efficiency = bits / (bandwidth_hz * subframe_s)
             done = outcome.delivered_now | ~outcome.was_pending

@@ -63,10 +63,16 @@ def clamp(x: Array, low: float | None = None, high: float | None = None) -> Arra
     return x.clamp(low, high)
 
 
-def float32_scalars(**values: float) -> SimpleNamespace:
+def float32_scalars(**values: float) -> SimpleNamespace | None:
     """``values`` as read-only float32 0-d arrays, for NumPy code on float32 arrays: the same
     operations as with the Python numbers (NumPy casts a Python scalar to the array's dtype
-    first), at about a third of NumPy's cost per call on arrays of a few entries."""
+    first), at about a third of NumPy's cost per call on arrays of a few entries.
+
+    None unless every value is a Python ``int`` or ``float`` (not a subclass): a NumPy scalar
+    such as ``np.float64`` keeps its own dtype in an operation, so the caller keeps its own
+    code for it."""
+    if not all(type(value) in (int, float) for value in values.values()):
+        return None
     arrays = {}
     for name, value in values.items():
         array = arrays[name] = np.array(value, np.float32)

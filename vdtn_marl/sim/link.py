@@ -567,7 +567,7 @@ class KernelConstants:
         )
 
     @property
-    def float32(self) -> SimpleNamespace:
+    def float32(self) -> SimpleNamespace | None:
         """The NumPy kernel's scalars as read-only float32 0-d arrays: on float32 arrays the
         same operations as with the Python numbers (NumPy casts a Python scalar to the
         array's dtype first), at a third of NumPy's cost per call."""
@@ -582,8 +582,10 @@ class KernelConstants:
         return replace(self, **arrays)
 
 
-@lru_cache(maxsize=16)
-def _kernel_float32(noise_mw: float, bandwidth_hz: float, subframe_s: float) -> SimpleNamespace:
+@lru_cache(maxsize=16, typed=True)  # np.float64(x) and x apart
+def _kernel_float32(
+    noise_mw: float, bandwidth_hz: float, subframe_s: float
+) -> SimpleNamespace | None:
     # positive numbers: the cache's key (equal values share an entry) loses no zero's sign
     return float32_scalars(
         zero=0.0,
@@ -667,6 +669,8 @@ def _subframe_step_numpy(tables, subframe, actions, state, decode, const) -> Sub
     the general code multiplies by 1 or meets a 0 already there); occupancy counts its
     non-zero entries; the scalars are float32 0-d arrays (:attr:`KernelConstants.float32`)."""
     c = const.float32
+    if c is None:  # constants that are not Python numbers
+        return _subframe_step_dense(tables, subframe, actions, state, decode, const)
     pending = state.remaining_bits > c.zero
     channel = decode.subchannel.take(actions)  # [B, L]
     power = decode.power_mw.take(actions) * pending  # [B, L]

@@ -631,8 +631,10 @@ class DigitalTwin:
         t = min(self.subframe, self.subframes_per_interval - 1)
         obs = self._rra_obs[t]
         state = self.link_state
-        if isinstance(obs, np.ndarray):  # the same numbers, written in place: fewer calls
+        c = None
+        if isinstance(obs, np.ndarray):
             c = _observation_float32(self.params.radio.cam_size_bits, self.num_links)
+        if c is not None:  # the same numbers, written in place: fewer calls
             remaining = state.remaining_bits / c.cam_size_bits
             np.divide(state.occupancy[:, None, :], c.num_links, out=obs[..., lay.occupancy])
             np.minimum(np.maximum(remaining, c.zero), c.one, out=obs[..., lay.bits_left])
@@ -809,8 +811,8 @@ class DigitalTwin:
         )
 
 
-@functools.lru_cache(maxsize=16)
-def _observation_float32(cam_size_bits: int, num_links: int) -> SimpleNamespace:
+@functools.lru_cache(maxsize=16, typed=True)  # np.int64(x) and x apart
+def _observation_float32(cam_size_bits: int, num_links: int) -> SimpleNamespace | None:
     """:meth:`DigitalTwin.rra_observation`'s numbers as read-only float32 0-d arrays: on its
     float32 arrays the same operations as with the Python numbers (NumPy casts a Python scalar
     to the array's dtype first), at a third of NumPy's cost per call."""

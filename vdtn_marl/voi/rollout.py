@@ -246,6 +246,11 @@ def _cacc_rollout_numpy(
         collision_penalty=pp.collision_penalty,
         zero=0.0,
     )
+    if c is None:  # constants that are not Python numbers: the general loop's arithmetic
+        return _rollout(
+            twin, state, interval, policy, horizon_intervals, discount,
+            first_command, first_switch, stop_at_episode_end, fused=False,
+        )  # fmt: skip
     lo, hi, top_lo, top_hi = c.lo, c.hi, c.top_lo, c.top_hi
     length, standstill, headway, interval_s = c.length, c.standstill, c.headway, c.interval_s
     zero = c.zero
@@ -327,16 +332,18 @@ def _cacc_rollout_numpy(
     return returns, final, alive
 
 
-def _float32_constants(**values) -> SimpleNamespace:
+def _float32_constants(**values) -> SimpleNamespace | None:
     """``values`` (Python numbers) as float32 0-d arrays, for :func:`_cacc_rollout_numpy`
     (read only; the same object for the same values)."""
-    # each value's sign in the key: 0.0 and -0.0 are equal keys but not the same number
-    return _float32_namespace(tuple((k, v, math.copysign(1.0, v)) for k, v in values.items()))
+    # each value's type and sign in the key: 0.0, -0.0 and np.float64(0.0) are equal keys
+    return _float32_namespace(
+        tuple((k, v, type(v), math.copysign(1.0, v)) for k, v in values.items())
+    )
 
 
 @lru_cache(maxsize=64)
-def _float32_namespace(items: tuple) -> SimpleNamespace:
-    return float32_scalars(**{name: value for name, value, _ in items})
+def _float32_namespace(items: tuple) -> SimpleNamespace | None:
+    return float32_scalars(**{name: value for name, value, _, _ in items})
 
 
 class RolloutValue:
