@@ -61,7 +61,8 @@ def check_kappa(kappa1: float, kappa2: float | None) -> tuple[float, float]:
 def _float32(value: float, array: np.ndarray):
     """``value`` for an operation with ``array``: a float32 0-d array when ``array`` is float32
     (the same result as the Python number, which NumPy casts to float32 first, for a third of
-    the cost of the call), else the number itself."""
+    the cost of the call), else the number itself. The reward's own copy of
+    :func:`vdtn_marl.sim.backend.float32_scalars` (this module imports no torch)."""
     if array.dtype != np.float32 or type(value) not in (int, float):  # np.float64 stays strong
         return value
     key = (value, math.copysign(1.0, value))  # 0.0 and -0.0 apart

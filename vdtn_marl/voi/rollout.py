@@ -184,7 +184,7 @@ def _rollout(
         if stop_at_episode_end:
             inside = as_float(interval + h < twin.params.episode_intervals)[:, None]
             reward = reward * inside
-        returns = returns + np.float32(weight) * (reward * alive[:, None])
+        returns = returns + weight * (reward * alive[:, None])
         alive = alive * as_float(~collided.any(-1))
         weight *= discount
         state = after
