@@ -72,6 +72,31 @@ def test_drawing_ahead_gives_the_numbers_of_drawing_in_place(batch, fading_draws
     _assert_equal(_episode(ahead), _episode(inline))
 
 
+class _AtOnce:
+    """A stand-in for ``threading.Thread`` that runs its job at ``start()``: the draws ahead are
+    then all made before the twin reads this interval's."""
+
+    def __init__(self, target, name=None, daemon=None):
+        self._target = target
+
+    def start(self) -> None:
+        self._target()
+
+    def join(self) -> None:
+        pass
+
+
+@pytest.mark.parametrize("fading_draws", ["normal", "exponential"])
+@pytest.mark.parametrize("batch", [link.DRAW_AHEAD_MIN_BATCH, link.LINK_MAJOR_MIN_BATCH])
+def test_draws_ahead_never_overwrite_the_interval_being_built(monkeypatch, batch, fading_draws):
+    """The next interval's draws start as soon as this interval's are taken, before its tables
+    and observations are built from them: into the other of two buffers. Drawing them at once
+    (the slowest main thread a real thread could meet) must change nothing."""
+    inline = _episode(_twin(batch, False, fading_draws))
+    monkeypatch.setattr(link.threading, "Thread", _AtOnce)
+    _assert_equal(_episode(_twin(batch, True, fading_draws)), inline)
+
+
 def test_draws_ahead_are_used_when_nothing_drew_and_redrawn_when_something_did(monkeypatch):
     twin = _twin(link.DRAW_AHEAD_MIN_BATCH, True)
     taken = []
@@ -114,7 +139,7 @@ def test_a_snapshot_or_a_copy_with_draws_pending_continues_as_the_twin_does():
 def test_an_error_while_drawing_ahead_is_raised_by_the_next_interval(monkeypatch):
     twin = _twin(link.DRAW_AHEAD_MIN_BATCH, True)
 
-    def broken(buffer, generator, fading_draws):
+    def broken(*args):
         raise RuntimeError("draw failed")
 
     twin._workspace.ahead._thread.join()  # the draws made at the reset are done

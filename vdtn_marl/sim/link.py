@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 from dataclasses import dataclass, fields, replace
 from functools import cache, lru_cache
 from types import SimpleNamespace
@@ -193,17 +194,19 @@ CHUNK_VALUES = 1 << 16
 
 
 class FadingWorkspace:
-    """Buffers the torch path reuses from interval to interval: the interval's normal draws
+    """Buffers the torch path reuses from interval to interval: the interval's fading draws
     and the scratch of a chunk, and the next interval's draws when a :class:`DrawAhead` is
-    making them (``ahead``). Never state (each interval overwrites them): it has no
+    making them (``ahead``, into the other of the two fading buffers: ``turn`` is the one
+    this interval's are in). Never state (each interval overwrites them): it has no
     ``__dict__``, so snapshots (:mod:`vdtn_marl.sim.snapshot`) skip it, and a deep copy of a
     twin gets a fresh one."""
 
-    __slots__ = ("_buffers", "ahead")
+    __slots__ = ("_buffers", "ahead", "turn")
 
     def __init__(self):
         self._buffers: dict[str, torch.Tensor] = {}
         self.ahead: DrawAhead | None = None
+        self.turn = 0
 
     def get(self, name: str, shape: tuple[int, ...], like: torch.Tensor) -> torch.Tensor:
         """The buffer ``name`` of ``shape`` in ``like``'s dtype and device (kept, or new)."""
@@ -228,20 +231,42 @@ def fading_width(links: int, subchannels: int) -> int:
 
 def fading_buffer(
     workspace: FadingWorkspace, batch: int, width: int, subframes: int, like: torch.Tensor,
-    fading_draws: str,
+    turn: int = 0,
 ) -> torch.Tensor:  # fmt: skip
-    """The buffer the torch path draws an interval's fading into: the normals
-    ``[2, T, B, W]``, or the Exp(1) gains ``[T, W, B]`` (``fading_draws="exponential"``)."""
-    if fading_draws == "exponential":
-        return workspace.get("exponential", (subframes, width, batch), like)
+    """The buffer ``[T, W, B]`` that holds an interval's fast-fading power gains |h|²,
+    link-major (:func:`draw_fading`). ``turn`` (0 or 1) picks one of two: the next
+    interval's gains are drawn into one (:class:`DrawAhead`) while this interval's are read
+    from the other."""
+    return workspace.get(f"fading{turn}", (subframes, width, batch), like)
+
+
+def normals_buffer(
+    workspace: FadingWorkspace, batch: int, width: int, subframes: int, like: torch.Tensor
+) -> torch.Tensor:
+    """Scratch ``[2, T, B, W]`` for the normal draws of ``fading_draws="normal"``."""
     return workspace.get("normals", (2, subframes, batch, width), like)
 
 
-def draw_fading(buffer: torch.Tensor, generator: torch.Generator, fading_draws: str) -> None:
-    """Fill :func:`fading_buffer`'s ``buffer`` with the interval's fading draws (one call: the
-    same numbers as :func:`~vdtn_marl.sim.channel.rayleigh_power_gain`'s randn)."""
+def draw_fading(
+    buffer: torch.Tensor, generator: torch.Generator, fading_draws: str,
+    normals: torch.Tensor | None = None,
+) -> None:  # fmt: skip
+    """Fill :func:`fading_buffer`'s ``buffer`` with the interval's fast-fading power gains.
+
+    ``"normal"``: one call draws the normals ``[2, T, B, W]`` into ``normals`` (a
+    :func:`normals_buffer`; the same numbers as
+    :func:`~vdtn_marl.sim.channel.rayleigh_power_gain`'s randn), then |h|² = (x² + y²)/2 is
+    written link-major into ``buffer``: in place in the draws, then one transposing copy
+    (elementwise operations that transpose as they go cost torch several times more). Whole
+    arrays, not chunks: on the :class:`DrawAhead` thread each call is a turn at the GIL the
+    main thread waits for (measured: chunks cost the twin at B = 256 about 7 %, and gained
+    nothing at B = 4,096). ``"exponential"``: one Exp(1) draw per gain, straight into
+    ``buffer``."""
     if fading_draws != "exponential":
-        buffer.normal_(generator=generator)
+        normals.normal_(generator=generator)
+        x, y = normals
+        x.mul_(x).add_(y.mul_(y)).mul_(0.5)
+        buffer.copy_(x.transpose(1, 2))
     elif buffer.device.type == "cpu":
         rayleigh_power_gain_exponential(buffer.shape, generator, out=buffer.numpy())
     else:
@@ -250,18 +275,19 @@ def draw_fading(buffer: torch.Tensor, generator: torch.Generator, fading_draws: 
 
 def draw_interval(
     generator: torch.Generator, batch: int, vehicles: int, fading: torch.Tensor | None,
-    fading_draws: str,
+    fading_draws: str, normals: torch.Tensor | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:  # fmt: skip
     """An interval's random draws in their fixed order: the V2V shadowing innovation
     ``[B, N, N]`` (before :func:`~vdtn_marl.sim.channel.symmetrize`), the V2I innovation
-    ``[B, N]``, then the fast fading into ``fading`` (a :func:`fading_buffer`; None: the
-    caller's :func:`build_interval_tables` draws it next). The only copy of this order: the
-    twin draws with it, and :class:`DrawAhead` with a copy of the twin's generator."""
+    ``[B, N]``, then the fast fading into ``fading`` (a :func:`fading_buffer`, with
+    ``normals`` a :func:`normals_buffer` for ``"normal"`` draws; None: the caller's
+    :func:`build_interval_tables` draws it next). The only copy of this order: the twin draws
+    with it, and :class:`DrawAhead` with a copy of the twin's generator."""
     device = generator.device
     v2v = torch.randn((batch, vehicles, vehicles), generator=generator, device=device)
     v2i = torch.randn(batch, vehicles, generator=generator, device=device)
     if fading is not None:
-        draw_fading(fading, generator, fading_draws)
+        draw_fading(fading, generator, fading_draws, normals)
     return v2v, v2i, fading
 
 
@@ -287,7 +313,7 @@ class DrawAhead:
 
     def __init__(
         self, generator: torch.Generator, batch: int, vehicles: int, fading: torch.Tensor,
-        fading_draws: str,
+        fading_draws: str, normals: torch.Tensor | None = None,
     ):  # fmt: skip
         self._start = generator.get_state()
         copy = torch.Generator(device=generator.device)
@@ -296,7 +322,7 @@ class DrawAhead:
 
         def job() -> None:
             try:
-                draws = draw_interval(copy, batch, vehicles, fading, fading_draws)
+                draws = draw_interval(copy, batch, vehicles, fading, fading_draws, normals)
                 self._result["done"] = (draws, copy.get_state())  # one store: all or nothing
             except BaseException as error:  # re-raised by take()
                 self._result["error"] = error
@@ -358,7 +384,7 @@ def build_interval_tables(
     a chunk of subframes at a time (:data:`CHUNK_VALUES`), into ``out``'s storage when it has
     the right shapes and is link-major (the previous interval's tables, overwritten), else
     into new tensors. ``drawn`` (torch): a :func:`fading_buffer` that already holds the
-    interval's fading draws (:func:`draw_interval`), which are then not drawn again.
+    interval's fading power gains (:func:`draw_interval`), which are then not drawn again.
     """
     b, n = v2i_gain_db.shape
     links, subch, t = topology.num_links, radio.num_subchannels, num_subframes
@@ -391,11 +417,8 @@ def build_interval_tables(
             drawn,
         )
 
-    if drawn is not None:  # the same numbers as the two draws below
-        if fading_draws == "exponential":  # [T, W, B] seen as [T, B, W]
-            fading = drawn.transpose(1, 2)
-        else:
-            fading = 0.5 * (drawn[0] * drawn[0] + drawn[1] * drawn[1])
+    if drawn is not None:  # [T, W, B] seen as [T, B, W]: the same numbers as the draws below
+        fading = drawn.transpose(1, 2)
     elif fading_draws == "exponential":  # [T, W, B] as link-major, seen as [T, B, W]
         fading = rayleigh_power_gain_exponential((t, width, b), generator).transpose(0, 2, 1)
         if not numpy:
@@ -483,23 +506,15 @@ def _build_tables_link_major(
 
     chunk = _chunk_subframes(b, width, t)
     block = links * subch
-    # |h|² ~ Exp(1) drawn link-major [T, W, B], or the normals [2, T, B, W] in one call
+    # |h|² link-major [T, W, B] (draw_fading)
     if drawn is None:
-        drawn = fading_buffer(workspace, b, width, t, own_ls, fading_draws)
-        draw_fading(drawn, generator, fading_draws)
+        drawn = fading_buffer(workspace, b, width, t, own_ls)
+        normals = normals_buffer(workspace, b, width, t, own_ls)
+        draw_fading(drawn, generator, fading_draws, normals)
     for t0 in range(0, t, chunk):
         t1 = min(t, t0 + chunk)
         c = t1 - t0
-        if fading_draws == "exponential":
-            fading = drawn[t0:t1]
-        else:
-            # |h|² = (x² + y²)/2 for the chunk, in place in the draws [C, B, W], then
-            # link-major [C, W, B] (one transposing copy: elementwise operations that
-            # transpose as they go cost torch several times more)
-            x, y = drawn[0, t0:t1], drawn[1, t0:t1]
-            x.mul_(x).add_(y.mul_(y)).mul_(0.5)
-            fading = workspace.get("fading", (chunk, width, b), own_ls)[:c]
-            fading.copy_(x.transpose(1, 2))
+        fading = drawn[t0:t1]
         torch.mul(fading[:, : 3 * block].view(c, 3, links, subch, b), gain_f, out=gains[t0:t1])
         gains[t0:t1, 1].mul_(v2i_power_mw)
         cut = 3 * block + links * links
@@ -830,6 +845,7 @@ def fill_rra_static_observation(
     noise_mw: float,
     out: torch.Tensor,
     workspace: FadingWorkspace,
+    each_chunk: Callable[[int, int], None] | None = None,
 ) -> None:
     """:func:`rra_static_observation` of torch tables written into ``out`` [T, B, L, 3M] (the
     CSI block of the observation buffer), a chunk of subframes at a time: the same float32
@@ -856,6 +872,8 @@ def fill_rra_static_observation(
             for i, gain in enumerate((own_gain, v2i_to_rx, tx_to_bs)):
                 torch.mul(gain[t0:t1], factor[i], out=ratios[:, i])
         ratios.log10_().mul_(10.0).div_(RRA_OBS_GAIN_SCALE_DB).clamp_(*RRA_OBS_GAIN_CLIP)
+        if each_chunk is not None:
+            each_chunk(t0, t1)
         blocks = out[t0:t1].view(c, batch, links, 3, subch)
         for i, j in enumerate(position):
             blocks[:, :, :, j].copy_(ratios[:, i].permute(0, 3, 1, 2))

@@ -437,11 +437,6 @@ class DigitalTwin:
             obs,
             v2i_sum,
         )
-        if self.draw_ahead:  # the next interval's draws, while this one's subframes run
-            n = self.params.platoon.num_vehicles
-            self._workspace.ahead = link.DrawAhead(
-                self.generator, b, n, self._fading_buffer(), self.fading_draws
-            )
 
     def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
@@ -451,14 +446,25 @@ class DigitalTwin:
         g = self.generator
         n = x.shape[1]
         # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends:
-        # made ahead on a second thread (begin_interval), or here
-        ahead, self._workspace.ahead = self._workspace.ahead, None
+        # made ahead on a second thread (started below at the last interval's start), or here
+        workspace = self._workspace
+        ahead, workspace.ahead = workspace.ahead, None
         draws = None if ahead is None else ahead.take(g)
         if draws is None:
             # NumPy: build_interval_tables draws the fading itself, as NumPy arrays
-            fading = None if ns.numpy else self._fading_buffer()
-            draws = link.draw_interval(g, self.batch_size, n, fading, self.fading_draws)
+            buffers = (None, None) if ns.numpy else self._fading_buffers(workspace.turn)
+            draws = link.draw_interval(
+                g, self.batch_size, n, buffers[0], self.fading_draws, buffers[1]
+            )
         v2v_innovation, v2i_innovation, drawn = draws
+        if self.draw_ahead:
+            # the next interval's draws from here on (nothing below draws), on a second
+            # thread while this interval's start and subframes run, into the other buffer
+            workspace.turn = 1 - workspace.turn
+            fading, normals = self._fading_buffers(workspace.turn)
+            workspace.ahead = link.DrawAhead(
+                g, self.batch_size, n, fading, self.fading_draws, normals
+            )
         self._v2v_shadow_db = v2v_shadow = channel.shadowing_update_db(
             self._v2v_shadow_db,
             moved[:, :, None] + moved[:, None, :],
@@ -495,17 +501,15 @@ class DigitalTwin:
             drawn=drawn,
         )
 
-    def _fading_buffer(self) -> torch.Tensor:
-        """The workspace buffer an interval's fading is drawn into (torch backend)."""
+    def _fading_buffers(self, turn: int) -> tuple[torch.Tensor, torch.Tensor | None]:
+        """The workspace buffers an interval's fading is drawn into (torch backend): the
+        power gains (buffer ``turn``) and, for normal draws, the normals' scratch."""
         width = link.fading_width(self.num_links, self.num_subchannels)
-        return link.fading_buffer(
-            self._workspace,
-            self.batch_size,
-            width,
-            self.subframes_per_interval,
-            self._time_left,
-            self.fading_draws,
-        )
+        shape = (self._workspace, self.batch_size, width, self.subframes_per_interval)
+        fading = link.fading_buffer(*shape, self._time_left, turn)
+        if self.fading_draws == "exponential":
+            return fading, None
+        return fading, link.normals_buffer(*shape, self._time_left)
 
     def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
@@ -550,15 +554,26 @@ class DigitalTwin:
         slot[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
         slot[..., lay["cam_delay_history"]] = self._cam_delay_history
         slot[..., lay["command_history"]] = history
-        obs[...] = slot
-        obs[..., lay.time_left] = self._time_left[:, None, None]
+        time_left = self._time_left
+
+        def fill(t0: int, t1: int) -> None:  # subframes t0..t1−1: all but the CSI
+            part = obs[t0:t1]
+            part[...] = slot
+            part[..., lay.time_left] = time_left[t0:t1, None, None]
+
         if not link.link_major(b, self.ns.numpy):
+            fill(0, t)
             obs[..., lay.csi] = link.rra_static_observation(
                 tables, self.params.radio, self._const.noise_mw
             )
-        else:
+        else:  # a chunk of subframes at a time, all features while its slots are in cache
             link.fill_rra_static_observation(
-                tables, self.params.radio, self._const.noise_mw, obs[..., lay.csi], self._workspace
+                tables,
+                self.params.radio,
+                self._const.noise_mw,
+                obs[..., lay.csi],
+                self._workspace,
+                each_chunk=fill,
             )
         return obs
 
