@@ -10,7 +10,11 @@ at each interval end the impaired vehicle observation, a CACC command, ``finish_
   start (``begin_interval``: shadowing, the interval's fading draws, tables and RRA
   observation buffer), as milliseconds and shares, and the agent-subframe steps/s they add
   up to. The twin draws at each interval's start (``draw_ahead=False``), so that the draws
-  show in the start's profile; ``benchmarks/throughput.py`` times both ways;
+  show in the start's profile; ``benchmarks/throughput.py`` times both ways. With
+  ``--draw-ahead`` the twin makes the next interval's draws on a second thread (the default
+  of ``DigitalTwin``): the phases are then the main thread's, and a fourth, ``wait``, is the
+  time the start waits for that thread before it begins (the thread's operators are in no
+  phase's table);
 - torch profiler tables of the start of an interval and of the subframes: each operator's
   share of the phase's self CPU time and its calls per interval;
 - the machine's limits measured in the same run: ``Tensor.normal_`` draws/s (the reference
@@ -23,6 +27,7 @@ the date and the load average. torch runs on ``--threads`` intra-op threads (def
 
     python benchmarks/profile_core.py                            # B = 1, 64, 1024, 4096
     python benchmarks/profile_core.py --batch-sizes 64 --intervals 5 --out /tmp/profile.json
+    python benchmarks/profile_core.py --batch-sizes 1024 4096 --draw-ahead   # two threads
     python benchmarks/profile_core.py --device cuda --batch-sizes 4096 65536
 """
 
@@ -44,9 +49,12 @@ from vdtn_marl.io.files import atomic_write_json, script_command
 from vdtn_marl.reporting.benchmarking import cpu_model
 
 PHASES = ("subframes", "close", "start")
+#: the phases with ``--draw-ahead``: ``wait`` is the start's wait for the second thread
+PHASES_AHEAD = ("subframes", "close", "wait", "start")
 PHASE_HELP = {
     "subframes": "T × (step_subframe + rra_observation)",
     "close": "vehicle observation + CACC + finish_interval",
+    "wait": "waiting at the start for the next interval's draws made on the second thread",
     "start": "begin_interval (shadowing, fading draws, tables, RRA observation buffer)",
 }
 TOP_OPS = 8
@@ -70,15 +78,23 @@ def parse_args(argv=None) -> argparse.Namespace:
         help="the twin's fast-fading draws (DigitalTwin fading_draws)",
     )
     p.add_argument(
+        "--draw-ahead",
+        action="store_true",
+        help="the next interval's draws on a second thread (DigitalTwin draw_ahead=True, from "
+        "B = 128 on the CPU); default: at each interval's start, so that they show in its table",
+    )
+    p.add_argument(
         "--out",
         type=Path,
         default=None,
-        help="results JSON (default benchmarks/results/profile_core.json, or "
-        "profile_core_exponential.json with --fading-draws exponential)",
+        help="results JSON (default benchmarks/results/profile_core.json, "
+        "profile_core_exponential.json with --fading-draws exponential, with _draw_ahead "
+        "before .json with --draw-ahead)",
     )
     args = p.parse_args(argv)
     if args.out is None:
         suffix = "" if args.fading_draws == "normal" else f"_{args.fading_draws}"
+        suffix += "_draw_ahead" if args.draw_ahead else ""
         args.out = Path(f"benchmarks/results/profile_core{suffix}.json")
     if any(b < 1 for b in args.batch_sizes):
         p.error(f"--batch-sizes {args.batch_sizes} must all be >= 1")
@@ -101,15 +117,23 @@ def _sync(device: torch.device) -> None:
 class CoreDriver:
     """The throughput benchmark's loop over a twin, one phase at a time."""
 
-    def __init__(self, batch: int, device: str, seed: int, fading_draws: str = "normal"):
+    def __init__(
+        self, batch: int, device: str, seed: int, fading_draws: str = "normal",
+        draw_ahead: bool = False,
+    ):  # fmt: skip
         from vdtn_marl.policies.cacc import CACCController
         from vdtn_marl.sim.twin import DigitalTwin
 
-        # the draws at the interval start (not on a second thread), so that each phase's
-        # operators are its own
+        # by default the draws at the interval start (not on a second thread), so that each
+        # phase's operators are its own
         self.twin = DigitalTwin(
-            batch_size=batch, device=device, seed=seed, fading_draws=fading_draws, draw_ahead=False
+            batch_size=batch,
+            device=device,
+            seed=seed,
+            fading_draws=fading_draws,
+            draw_ahead=draw_ahead,
         )
+        self.phases = PHASES_AHEAD if draw_ahead else PHASES
         self.device = self.twin.device
         self.controller = CACCController(self.twin.params.platoon)
         self.generator = torch.Generator(device=self.device)
@@ -129,6 +153,12 @@ class CoreDriver:
         twin = self.twin
         twin.finish_interval(self.controller(twin.vehicle_observation(False)), perfect=False)
 
+    def wait(self) -> None:
+        # the draws being made ahead (a private attribute: this script measures the thread)
+        pending = self.twin._workspace.ahead
+        if pending is not None:
+            pending.wait()
+
     def start(self) -> None:
         twin = self.twin
         if int(twin.interval[0]) >= twin.params.episode_intervals:
@@ -137,7 +167,7 @@ class CoreDriver:
             twin.begin_interval()
 
     def interval(self, times: dict[str, float] | None = None) -> None:
-        for phase in PHASES:
+        for phase in self.phases:
             begin = time.perf_counter()
             with record_function(phase):
                 getattr(self, phase)()
@@ -147,13 +177,14 @@ class CoreDriver:
 
 
 def profile_batch(
-    batch: int, device: str, seconds: float, intervals: int, seed: int, fading_draws: str
-) -> dict:
-    driver = CoreDriver(batch, device, seed, fading_draws)
+    batch: int, device: str, seconds: float, intervals: int, seed: int, fading_draws: str,
+    draw_ahead: bool = False,
+) -> dict:  # fmt: skip
+    driver = CoreDriver(batch, device, seed, fading_draws, draw_ahead)
     twin = driver.twin
     driver.interval()  # warm-up: buffers, caches
     _sync(driver.device)
-    times = dict.fromkeys(PHASES, 0.0)
+    times = dict.fromkeys(driver.phases, 0.0)
     count = 0
     start = time.perf_counter()
     while (count < intervals) if intervals else (time.perf_counter() - start < seconds):
@@ -182,6 +213,7 @@ def profile_batch(
         "agent_steps_per_s": steps / (total_ms / 1000.0),
         "ops": {phase: _phase_ops(prof, phase, profiled) for phase in ("start", "subframes")},
         "fading_draws": twin.fading_draws,
+        "draw_ahead": twin.draw_ahead,
         "draws_per_interval": _draws_per_interval(twin),
         "table_bytes_per_interval": _table_bytes(twin),
     }
@@ -268,10 +300,13 @@ def machine_limits(device: str, seed: int) -> dict:
 
 
 def report(results: list[dict], limits: dict) -> str:
+    ahead = any("wait" in r["per_interval_ms"] for r in results)
+    phases = PHASES_AHEAD if ahead else PHASES
     lines = [
-        "| B | subframes ms | close ms | start ms | interval ms | agent-subframe steps/s |"
-        " draws + tables at the limits, ms |",
-        "|--:|--:|--:|--:|--:|--:|--:|",
+        "| B | "
+        + " | ".join(f"{p} ms" for p in phases)
+        + " | interval ms | agent-subframe steps/s | draws + tables at the limits, ms |",
+        "|--:|" + "--:|" * (len(phases) + 3),
     ]
     for r in results:
         ms = r["per_interval_ms"]
@@ -283,7 +318,9 @@ def report(results: list[dict], limits: dict) -> str:
         )
         lines.append(
             f"| {r['batch_size']:,} | "
-            + " | ".join(f"{ms[p]:.2f} ({100 * ms[p] / total:.0f} %)" for p in PHASES)
+            + " | ".join(
+                f"{ms.get(p, 0.0):.2f} ({100 * ms.get(p, 0.0) / total:.0f} %)" for p in phases
+            )
             + f" | {total:.2f} | {r['agent_steps_per_s']:,.0f} | {floor:.2f} |"
         )
     for r in results:
@@ -320,7 +357,13 @@ def main(argv=None) -> int:
         print(f"profiling B = {batch} on {args.device} ...", flush=True)
         results.append(
             profile_batch(
-                batch, args.device, args.seconds, args.intervals, args.seed, args.fading_draws
+                batch,
+                args.device,
+                args.seconds,
+                args.intervals,
+                args.seed,
+                args.fading_draws,
+                args.draw_ahead,
             )
         )
     limits_after = machine_limits(args.device, args.seed)
@@ -339,6 +382,7 @@ def main(argv=None) -> int:
         "torch_threads": torch.get_num_threads(),
         "device": args.device,
         "fading_draws": args.fading_draws,
+        "draw_ahead": args.draw_ahead,
         "device_name": (
             torch.cuda.get_device_name(torch.device(args.device))
             if args.device.startswith("cuda")

@@ -125,11 +125,34 @@ def test_profile_attributes_the_fading_draws_to_the_interval_start(tmp_path, cap
     assert "--batch-sizes" in capsys.readouterr().err
 
 
+@pytest.mark.slow
+def test_profile_with_draws_ahead_times_the_wait_and_leaves_the_draws_out_of_the_start(
+    tmp_path, capsys
+):
+    from vdtn_marl.sim.link import DRAW_AHEAD_MIN_BATCH
+
+    out = tmp_path / "profile.json"
+    module = _profile_module()
+    module.LIMIT_VALUES = 1 << 16
+    argv = ["--batch-sizes", str(DRAW_AHEAD_MIN_BATCH), "--intervals", "2", "--draw-ahead"]
+    assert module.main([*argv, "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    (row,) = data["results"]
+    assert data["draw_ahead"] and row["draw_ahead"]
+    assert set(row["per_interval_ms"]) == set(module.PHASES_AHEAD)
+    assert row["interval_ms"] == pytest.approx(sum(row["per_interval_ms"].values()))
+    # the normals are drawn on the second thread, so in no phase of the main thread
+    assert "aten::normal_" not in {o["op"] for o in row["ops"]["start"]}
+    assert "| wait ms |" in capsys.readouterr().out
+
+
 def test_profile_writes_each_fading_law_to_its_own_file_by_default():
     module = _profile_module()
     assert module.parse_args([]).out.name == "profile_core.json"
     exponential = module.parse_args(["--fading-draws", "exponential"])
     assert exponential.out.name == "profile_core_exponential.json"
+    ahead = module.parse_args(["--draw-ahead"])
+    assert ahead.out.name == "profile_core_draw_ahead.json"
     assert module.parse_args(["--out", "x.json"]).out.name == "x.json"
 
 

@@ -332,6 +332,10 @@ class DrawAhead:
         self._thread = threading.Thread(target=job, name="vdtn-draw-ahead", daemon=False)
         self._thread.start()
 
+    def wait(self) -> None:
+        """Block until the draws are made (:meth:`take` waits too; profiling times this)."""
+        self._thread.join()
+
     def take(self, generator: torch.Generator):
         """The draws ``(v2v, v2i, fading)``, ``generator`` advanced past them, or None when
         ``generator`` has drawn (or been set) since: then the caller draws them itself."""
