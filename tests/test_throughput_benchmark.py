@@ -1,5 +1,6 @@
-"""benchmarks/throughput.py: the side-by-side harness against a peer's checkout and the
-targets it prints (not timings: the figures come from running the script)."""
+"""benchmarks/throughput.py (the side-by-side harness against a peer's checkout and the
+targets it prints), profile_core.py and compile_kernel.py: not timings (the figures come from
+running the scripts) but what they run and write."""
 
 import importlib.util
 import json
@@ -185,3 +186,53 @@ def test_draw_ahead_rows_are_their_own_series(tmp_path):
     assert any("draw-ahead off: agent-subframe" in name for name in named)
     steps = [t for t in targets if ">= 4,000,000" in t["target"]]
     assert sorted(t["value"] for t in steps) == [1000.0 * 4096 * 3, 2000.0 * 4096 * 3]
+
+
+def _compile_module():
+    script = SCRIPT.parent / "compile_kernel.py"
+    spec = importlib.util.spec_from_file_location("_bench_compile_kernel", script)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_compile_benchmark_runs_the_twins_own_kernel_arithmetic():
+    """The benchmark's eager run is the twin's link-major kernel: the same outcomes, subframe
+    by subframe, as ``subframe_step`` on a twin built alike (so what it compiles is what the
+    twin runs)."""
+    import dataclasses
+
+    import torch
+
+    from vdtn_marl.sim import link
+    from vdtn_marl.sim.twin import DigitalTwin
+
+    module = _compile_module()
+    batch = link.LINK_MAJOR_MIN_BATCH
+    interval = module.Interval(batch, seed=4)
+    got = interval.run(link.link_major_arithmetic)
+    twin = DigitalTwin(batch_size=batch, seed=4, draw_ahead=False)
+    for t in range(twin.subframes_per_interval):
+        outcome = twin.step_subframe(interval.actions[t])
+        v2i_rate, v2v_bits, power, delivered, pending = (x.T for x in got[t][:5])
+        want = dataclasses.astuple(outcome)
+        for a, b in zip((v2i_rate, v2v_bits, power, delivered, pending), want, strict=True):
+            assert torch.equal(a, b), t
+
+
+@pytest.mark.slow
+def test_compile_benchmark_writes_a_row_per_batch(tmp_path, capsys):
+    out = tmp_path / "ck.json"
+    module = _compile_module()
+    argv = ["--batch-sizes", "8", "--repeats", "1", "--intervals", "1", "--out", str(out)]
+    assert module.main(argv) == 0
+    (row,) = json.loads(out.read_text())["rows"]
+    assert row["batch_size"] == 8
+    if row["compiled"]:  # a machine with a C++ compiler
+        assert isinstance(row["bit_identical"], bool)
+        assert row["eager_us"] > 0 and row["compiled_us"] > 0
+    else:  # where compilation fails the row says why
+        assert row["error"]
+    with pytest.raises(SystemExit):
+        module.main(["--repeats", "0"])
+    assert "--repeats" in capsys.readouterr().err

@@ -717,23 +717,59 @@ _add_reduce = np.add.reduce
 def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -> SubframeOutcome:
     """:func:`subframe_step` on torch tensors, link-major: every array is ``[L, B]``,
     ``[L, M, B]``, ``[L, L, B]`` or ``[M, B]``, so that each operation streams over the batch
-    (broadcasts over a trailing axis of 3 or 4 entries cost torch several times more)."""
+    (broadcasts over a trailing axis of 3 or 4 entries cost torch several times more). The
+    arithmetic is :func:`link_major_arithmetic`; this wrapper slices the subframe's tables and
+    rebinds the state."""
     own_gain, v2i_to_rx, tx_to_bs, cross_gain, v2i_signal = (
         table[subframe] for table in tables.link_major()
     )
-    links, subch, batch = own_gain.shape
+    links, subch, _ = own_gain.shape
+    v2i_rate, v2v_bits, power, delivered_now, pending, remaining, occupancy = (
+        link_major_arithmetic(
+            own_gain, v2i_to_rx, tx_to_bs, cross_gain, v2i_signal, actions,
+            state.remaining_bits, decode.subchannel, decode.power_mw, const.link_offset,
+            const.channel_offset, const.subchannels, const.noise_mw,
+            const.bandwidth_hz * const.subframe_s / math.log(2.0),
+            const.bandwidth_hz / math.log(2.0),
+            _torch_adds_in_link_order(links, subch, own_gain.device),
+        )
+    )  # fmt: skip
+    delay = torch.where(delivered_now, subframe + 1, state.delay_subframes.T)
+    state.remaining_bits, state.delay_subframes, state.occupancy = (
+        remaining.T,
+        delay.T,
+        occupancy.T,
+    )
+    return SubframeOutcome(v2i_rate.T, v2v_bits.T, power.T, delivered_now.T, pending.T)
+
+
+def link_major_arithmetic(
+    own_gain: torch.Tensor, v2i_to_rx: torch.Tensor, tx_to_bs: torch.Tensor,
+    cross_gain: torch.Tensor, v2i_signal: torch.Tensor, actions: torch.Tensor,
+    remaining_bits: torch.Tensor, subchannel_of: torch.Tensor, power_of: torch.Tensor,
+    link_offset: torch.Tensor, channel_offset: torch.Tensor, subchannels: torch.Tensor,
+    noise_mw: float, bits_per_log1p: float, rate_per_log1p: float, in_link_order: bool,
+) -> tuple[torch.Tensor, ...]:  # fmt: skip
+    """The arithmetic of one link-major subframe: tensors in, tensors out, no Python state (so
+    that it can also be handed to ``torch.compile``; ``benchmarks/compile_kernel.py``).
+
+    One subframe's tables (``[L, M, B]`` ×3, ``[L_rx, L_tx, B]``, ``[M, B]``), the actions and
+    the remaining bits ``[B, L]``, the action decoding and index constants of
+    :class:`KernelConstants` and :class:`ActionTables`, and the scalars. Returns link-major
+    ``v2i_rate [M, B]``, ``v2v_bits``, ``power``, ``delivered_now``, ``pending``, the new
+    remaining bits ``[L, B]`` and the occupancy ``[M, B]``."""
+    links = own_gain.shape[0]
     act = actions.T.contiguous()  # [L, B]: one copy, read by three gathers
-    pending = state.remaining_bits.T > 0
-    channel = decode.subchannel.take(act)
-    power = torch.where(pending, decode.power_mw.take(act), 0.0)
+    pending = remaining_bits.T > 0
+    channel = subchannel_of.take(act)
+    power = torch.where(pending, power_of.take(act), 0.0)
 
     # entry [l, channel[l, b], b] of a contiguous [L, M, B] array, as one flat gather
-    flat = const.link_offset + const.channel_offset.take(act)
+    flat = link_offset + channel_offset.take(act)
     own = own_gain.take(flat)
     from_v2i = v2i_to_rx.take(flat)
     # interference at receiver i from every transmitter j on i's sub-channel
-    on_channel = channel[:, None, :] == const.subchannels  # [L, M, B]
-    in_link_order = _torch_adds_in_link_order(links, subch, own_gain.device)
+    on_channel = channel[:, None, :] == subchannels  # [L, M, B]
     if in_link_order:
         same = channel[:, None, :] == channel[None, :, :]  # [L_rx, L_tx, B]
         terms = cross_gain * torch.where(same, power[None, :, :], 0.0)
@@ -746,25 +782,19 @@ def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -
             cross_gain.permute(2, 0, 1).contiguous(), power_onehot.contiguous()
         )  # [B, L_rx, M]
         from_v2v = rx_per_channel.permute(1, 2, 0).take(flat)
-    v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
-    v2v_bits = torch.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
+    v2v_sinr = power * own / (noise_mw + from_v2i + from_v2v)
+    v2v_bits = torch.log1p(v2v_sinr) * bits_per_log1p
 
     # each link's power at the BS on its sub-channel, summed per sub-channel in link order
     to_bs = torch.where(on_channel, (power * tx_to_bs.take(flat))[:, None, :], 0.0)
     bs_interference = _sum_links_link_major(to_bs, in_link_order)  # [M, B]
-    v2i_sinr = v2i_signal / (const.noise_mw + bs_interference)
-    v2i_rate = torch.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
+    v2i_sinr = v2i_signal / (noise_mw + bs_interference)
+    v2i_rate = torch.log1p(v2i_sinr) * rate_per_log1p
 
-    remaining = state.remaining_bits.T - v2v_bits
+    remaining = remaining_bits.T - v2v_bits
     delivered_now = pending & (remaining <= 0)
-    delay = torch.where(delivered_now, subframe + 1, state.delay_subframes.T)
     occupancy = (on_channel & (power > 0)[:, None, :]).sum(0, dtype=torch.float32)
-    state.remaining_bits, state.delay_subframes, state.occupancy = (
-        remaining.T,
-        delay.T,
-        occupancy.T,
-    )
-    return SubframeOutcome(v2i_rate.T, v2v_bits.T, power.T, delivered_now.T, pending.T)
+    return v2i_rate, v2v_bits, power, delivered_now, pending, remaining, occupancy
 
 
 def _torch_adds_in_link_order(links: int, subchannels: int, device: torch.device) -> bool:
