@@ -22,7 +22,6 @@ done*). torch runs on 1 intra-op thread.
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import statistics
 import time
@@ -57,26 +56,18 @@ class Interval:
         from vdtn_marl.sim.twin import DigitalTwin
 
         twin = DigitalTwin(batch_size=batch, seed=seed, draw_ahead=False)
-        const, decode = twin._const, twin._decode  # the kernel's own constants
         self.subframes = twin.subframes_per_interval
         self.tables = twin.tables.link_major()
-        links, subch = twin.num_links, twin.num_subchannels
         generator = torch.Generator().manual_seed(seed)
         self.actions = torch.randint(
-            0, twin.params.radio.num_actions, (self.subframes, batch, links), generator=generator
+            0,
+            twin.params.radio.num_actions,
+            (self.subframes, batch, twin.num_links),
+            generator=generator,
         )
         self.remaining = twin.link_state.remaining_bits
-        self.constants = (
-            decode.subchannel,
-            decode.power_mw,
-            const.link_offset,
-            const.channel_offset,
-            const.subchannels,
-            const.noise_mw,
-            const.bandwidth_hz * const.subframe_s / math.log(2.0),
-            const.bandwidth_hz / math.log(2.0),
-            link._torch_adds_in_link_order(links, subch, twin.device),
-        )
+        # the kernel's own constants, as the twin passes them
+        self.constants = link.link_major_constants(twin._decode, twin._const, self.tables[0][0])
 
     def run(self, kernel) -> list:
         remaining, outputs = self.remaining, []

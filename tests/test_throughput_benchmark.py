@@ -51,8 +51,9 @@ def get_state(env, idx=(0, 0), ind_episode=1.0, epsi=0.02):
 """
 
 
-def _module():
-    spec = importlib.util.spec_from_file_location("_bench_throughput_peer", SCRIPT)
+def _script(name: str = SCRIPT.name):
+    """A fresh copy of the benchmark script ``benchmarks/<name>`` as a module."""
+    spec = importlib.util.spec_from_file_location(f"_bench_{name[:-3]}", SCRIPT.parent / name)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -61,11 +62,11 @@ def _module():
 def test_peer_path_without_the_simulator_is_refused_before_anything_runs(tmp_path, capsys):
     out = tmp_path / "t.json"
     with pytest.raises(SystemExit):
-        _module().main(["--peer", "liang", str(tmp_path), "--out", str(out)])
+        _script().main(["--peer", "liang", str(tmp_path), "--out", str(out)])
     assert "--peer liang" in capsys.readouterr().err
     assert not out.exists()
     with pytest.raises(SystemExit):
-        _module().main(["--peer", "nobody", str(tmp_path)])
+        _script().main(["--peer", "nobody", str(tmp_path)])
     assert "--peer 'nobody'" in capsys.readouterr().err
 
 
@@ -74,7 +75,7 @@ def test_peer_rows_are_timed_in_the_same_run_and_ratios_printed(tmp_path, capsys
     checkout.mkdir()
     (checkout / "Environment_marl.py").write_text(FAKE_ENVIRONMENT)
     (checkout / "main_marl_train.py").write_text(FAKE_TRAIN)
-    module = _module()
+    module = _script()
     out = tmp_path / "t.json"
     args = ["--seconds", "0.05", "--repeats", "2", "--rows", "core", "--batch-sizes", "8"]
     assert (
@@ -97,18 +98,10 @@ def test_peer_rows_are_timed_in_the_same_run_and_ratios_printed(tmp_path, capsys
     assert "PEER_CHECKOUT" in data["argv"]
 
 
-def _profile_module():
-    script = SCRIPT.parent / "profile_core.py"
-    spec = importlib.util.spec_from_file_location("_bench_profile_core", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.mark.slow
 def test_profile_attributes_the_fading_draws_to_the_interval_start(tmp_path, capsys):
     out = tmp_path / "profile.json"
-    module = _profile_module()
+    module = _script("profile_core.py")
     module.LIMIT_VALUES = 1 << 16  # the machine's limits on small arrays: a quick test
     assert module.main(["--batch-sizes", "3", "--intervals", "2", "--out", str(out)]) == 0
     data = json.loads(out.read_text())
@@ -133,7 +126,7 @@ def test_profile_with_draws_ahead_times_the_wait_and_leaves_the_draws_out_of_the
     from vdtn_marl.sim.link import DRAW_AHEAD_MIN_BATCH
 
     out = tmp_path / "profile.json"
-    module = _profile_module()
+    module = _script("profile_core.py")
     module.LIMIT_VALUES = 1 << 16
     argv = ["--batch-sizes", str(DRAW_AHEAD_MIN_BATCH), "--intervals", "2", "--draw-ahead"]
     assert module.main([*argv, "--out", str(out)]) == 0
@@ -148,7 +141,7 @@ def test_profile_with_draws_ahead_times_the_wait_and_leaves_the_draws_out_of_the
 
 
 def test_profile_writes_each_fading_law_to_its_own_file_by_default():
-    module = _profile_module()
+    module = _script("profile_core.py")
     assert module.parse_args([]).out.name == "profile_core.json"
     exponential = module.parse_args(["--fading-draws", "exponential"])
     assert exponential.out.name == "profile_core_exponential.json"
@@ -161,7 +154,7 @@ def test_draw_ahead_rows_are_their_own_series(tmp_path):
     """``--draw-ahead on off``: one row each, recorded in the JSON; the targets judge each
     series on its own rows."""
     out = tmp_path / "t.json"
-    module = _module()
+    module = _script()
     args = ["--seconds", "0.02", "--repeats", "1", "--rows", "core", "--no-cuda"]
     sizes = ["--batch-sizes", "128", "4096", "8192"]
     monkey_rows = []
@@ -188,14 +181,6 @@ def test_draw_ahead_rows_are_their_own_series(tmp_path):
     assert sorted(t["value"] for t in steps) == [1000.0 * 4096 * 3, 2000.0 * 4096 * 3]
 
 
-def _compile_module():
-    script = SCRIPT.parent / "compile_kernel.py"
-    spec = importlib.util.spec_from_file_location("_bench_compile_kernel", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 def test_compile_benchmark_runs_the_twins_own_kernel_arithmetic():
     """The benchmark's eager run is the twin's link-major kernel: the same outcomes, subframe
     by subframe, as ``subframe_step`` on a twin built alike (so what it compiles is what the
@@ -207,7 +192,7 @@ def test_compile_benchmark_runs_the_twins_own_kernel_arithmetic():
     from vdtn_marl.sim import link
     from vdtn_marl.sim.twin import DigitalTwin
 
-    module = _compile_module()
+    module = _script("compile_kernel.py")
     batch = link.LINK_MAJOR_MIN_BATCH
     interval = module.Interval(batch, seed=4)
     got = interval.run(link.link_major_arithmetic)
@@ -223,7 +208,7 @@ def test_compile_benchmark_runs_the_twins_own_kernel_arithmetic():
 @pytest.mark.slow
 def test_compile_benchmark_writes_a_row_per_batch(tmp_path, capsys):
     out = tmp_path / "ck.json"
-    module = _compile_module()
+    module = _script("compile_kernel.py")
     argv = ["--batch-sizes", "8", "--repeats", "1", "--intervals", "1", "--out", str(out)]
     assert module.main(argv) == 0
     (row,) = json.loads(out.read_text())["rows"]

@@ -723,15 +723,10 @@ def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -
     own_gain, v2i_to_rx, tx_to_bs, cross_gain, v2i_signal = (
         table[subframe] for table in tables.link_major()
     )
-    links, subch, _ = own_gain.shape
     v2i_rate, v2v_bits, power, delivered_now, pending, remaining, occupancy = (
         link_major_arithmetic(
             own_gain, v2i_to_rx, tx_to_bs, cross_gain, v2i_signal, actions,
-            state.remaining_bits, decode.subchannel, decode.power_mw, const.link_offset,
-            const.channel_offset, const.subchannels, const.noise_mw,
-            const.bandwidth_hz * const.subframe_s / math.log(2.0),
-            const.bandwidth_hz / math.log(2.0),
-            _torch_adds_in_link_order(links, subch, own_gain.device),
+            state.remaining_bits, *link_major_constants(decode, const, own_gain),
         )
     )  # fmt: skip
     delay = torch.where(delivered_now, subframe + 1, state.delay_subframes.T)
@@ -741,6 +736,24 @@ def _subframe_step_link_major(tables, subframe, actions, state, decode, const) -
         occupancy.T,
     )
     return SubframeOutcome(v2i_rate.T, v2v_bits.T, power.T, delivered_now.T, pending.T)
+
+
+def link_major_constants(decode: ActionTables, const: KernelConstants, own_gain: torch.Tensor):
+    """The arguments of :func:`link_major_arithmetic` after the remaining bits: the action
+    decoding, the index constants and the scalars (``own_gain`` [L, M, B]: one subframe's
+    table, for the shapes and the device)."""
+    links, subch, _ = own_gain.shape
+    return (
+        decode.subchannel,
+        decode.power_mw,
+        const.link_offset,
+        const.channel_offset,
+        const.subchannels,
+        const.noise_mw,
+        const.bandwidth_hz * const.subframe_s / math.log(2.0),
+        const.bandwidth_hz / math.log(2.0),
+        _torch_adds_in_link_order(links, subch, own_gain.device),
+    )
 
 
 def link_major_arithmetic(
@@ -754,8 +767,7 @@ def link_major_arithmetic(
     that it can also be handed to ``torch.compile``; ``benchmarks/compile_kernel.py``).
 
     One subframe's tables (``[L, M, B]`` ×3, ``[L_rx, L_tx, B]``, ``[M, B]``), the actions and
-    the remaining bits ``[B, L]``, the action decoding and index constants of
-    :class:`KernelConstants` and :class:`ActionTables`, and the scalars. Returns link-major
+    the remaining bits ``[B, L]``, then :func:`link_major_constants`. Returns link-major
     ``v2i_rate [M, B]``, ``v2v_bits``, ``power``, ``delivered_now``, ``pending``, the new
     remaining bits ``[L, B]`` and the occupancy ``[M, B]``."""
     links = own_gain.shape[0]

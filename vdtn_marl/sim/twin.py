@@ -505,11 +505,11 @@ class DigitalTwin:
         """The workspace buffers an interval's fading is drawn into (torch backend): the
         power gains (buffer ``turn``) and, for normal draws, the normals' scratch."""
         width = link.fading_width(self.num_links, self.num_subchannels)
-        shape = (self._workspace, self.batch_size, width, self.subframes_per_interval)
-        fading = link.fading_buffer(*shape, self._time_left, turn)
+        sizes = (self._workspace, self.batch_size, width, self.subframes_per_interval)
+        fading = link.fading_buffer(*sizes, self._time_left, turn)
         if self.fading_draws == "exponential":
             return fading, None
-        return fading, link.normals_buffer(*shape, self._time_left)
+        return fading, link.normals_buffer(*sizes, self._time_left)
 
     def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
