@@ -221,3 +221,66 @@ def test_compile_benchmark_writes_a_row_per_batch(tmp_path, capsys):
     with pytest.raises(SystemExit):
         module.main(["--repeats", "0"])
     assert "--repeats" in capsys.readouterr().err
+
+
+def _stages_file(path, later_s, pi_tilde_s, iterations=500, control=1024):
+    path.write_text(
+        json.dumps(
+            {
+                "written": "2026-01-01",
+                "estimate": {
+                    "seconds": {"pi_tilde_learned": pi_tilde_s},
+                    "budgets": {"control_iterations": iterations},
+                    "later_iteration_s": later_s,
+                    "chosen_batches": {"control": control, "rra": 512},
+                },
+            }
+        )
+    )
+    return path
+
+
+def test_pi_tilde_budget_leaves_pi_tilde_what_the_other_stages_leave_of_30_minutes(tmp_path):
+    module = _script("pi_tilde_budget.py")
+    stages = _stages_file(tmp_path / "st.json", later_s=3000.0, pi_tilde_s=2000.0)
+    # other stages 1000 s: π̃ gets (1800 − 1000) / 500 = 1.6 s per iteration, 2.5× less than 4 s
+    slow = module.budget(stages, [{"batch_size": 1024, "eager_over_floor": 2.0}])
+    assert slow["allowed_pi_tilde_s_per_iteration"] == pytest.approx(1.6)
+    assert slow["needed_speedup"] == pytest.approx(2.5)
+    assert slow["reachable_at_the_floor"] is False
+    fast = module.budget(stages, [{"batch_size": 1024, "eager_over_floor": 3.0}])
+    assert fast["reachable_at_the_floor"] is True
+    other_size = module.budget(stages, [{"batch_size": 256, "eager_over_floor": 9.0}])
+    assert "reachable_at_the_floor" not in other_size
+    assert module.budget(tmp_path / "absent.json", [])["missing"]
+
+
+def test_pi_tilde_budget_refuses_batch_sizes_that_do_not_divide_the_frames(capsys):
+    module = _script("pi_tilde_budget.py")
+    with pytest.raises(SystemExit):
+        module.parse_args(["--batch-sizes", "3", "--frames", "16"])
+    assert "--batch-sizes" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_pi_tilde_budget_times_eager_and_compiled_iterations_and_their_floor(tmp_path):
+    module = _script("pi_tilde_budget.py")
+    out = tmp_path / "pt.json"
+    stages = _stages_file(tmp_path / "st.json", later_s=3000.0, pi_tilde_s=2000.0, control=8)
+    argv = ["--batch-sizes", "8", "--frames", "16", "--repeats", "1", "--calls", "2"]
+    assert module.main([*argv, "--stages", str(stages), "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    (row,) = result["rows"]
+    assert row["batch_size"] == 8 and len(row["eager"]) == 1
+    assert row["eager"][0]["intervals"] == 2
+    # one radio run per interval at least (more where scenarios ended and were reset)
+    assert row["radio_runs_per_interval"] >= 1.0
+    assert 0 < row["update_s"] < row["floor_s"]
+    assert row["floor_s"] == pytest.approx(sum(row["floor_parts_s"].values()))
+    if row["compiled"]:  # a machine with a C++ compiler
+        assert isinstance(row["policy_actions_bit_identical"], bool)
+        assert row["compiled_s"] > 0 and row["kernel_compiled_us"] > 0
+    else:
+        assert row["error"]
+    # not the paper's samples per iteration: no floor against the 30-minute budget
+    assert "floor_speedup_here" not in result["budget"]
