@@ -18,12 +18,13 @@ on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
    this is a measurement, not a switch (docs/profile.md, *Not done*). Each iteration also
    counts its radio runs: one per control interval, and one more per interval at which some
    scenarios ended (a partial reset runs its first interval's radio over the whole batch, the
-   other scenarios masked out), so an untrained π̃ that crashes costs more.
+   other scenarios masked out), so a π̃ whose scenarios crash costs more.
 2. **The arithmetic floor** of an iteration: the PPO update as measured, plus, for one radio
    run per interval, the RRA network's matrix products and activations alone (three
-   ``F.linear`` and two activations on ``[B, L, D]``, nothing else) and the compiled kernel's
-   subframe, each the fastest of 5 timed blocks. Everything else (observations, the
-   interval's start and close, the control policy, TensorDicts, Python) counts as free. It
+   ``F.linear`` and two activations, in place as the call applies them, on ``[B, L, D]``,
+   nothing else) and the compiled kernel's subframe, each the fastest of 5 timed blocks.
+   Everything else (observations, the interval's start and close, the control policy,
+   TensorDicts, Python) counts as free. It
    is a floor for torch on this CPU as long as the network's products and activations stay
    torch's (MKL's GEMM, torch's activation kernels); a hand-fused kernel could save the
    activations' memory passes, not the products.
@@ -251,18 +252,18 @@ def measure(batch: int, repeats: int, calls: int, frames: int = CONTROL_FRAMES) 
     # the floor: the network's products and activations, the compiled kernel, the update
     x = mode.scaler(observation)
     weights = [w.detach() for w in _weights(mode)]
-    functions = mode._functions
     hidden = []
     with torch.no_grad():
         h = x
         i = 0
-        for function in functions:
+        # each activation as the policy's call applies it (in place on a Linear's output)
+        for function, call in zip(mode._functions, mode._calls, strict=True):
             if function is None:
                 hidden.append(("linear", h, weights[i], weights[i + 1]))
                 h = F.linear(h, weights[i], weights[i + 1])
                 i += 2
             else:
-                hidden.append(("activation", h, function))
+                hidden.append(("activation", h.clone(), call))
                 h = function(h)
 
         def linears():

@@ -157,6 +157,20 @@ def test_every_activation_name_has_a_module_class():
         _discrete_actor(activation="relu")
 
 
+@pytest.mark.parametrize("activation", ACTIVATIONS)
+def test_in_place_activation_gives_the_same_numbers(activation):
+    """Each activation's ``function_`` (what the RRA policy's fast path applies to a Linear
+    layer's output) writes ``function``'s numbers bit for bit into its argument."""
+    cls = ACTIVATION_CLASSES[activation]
+    x = torch.randn(3000, 64) * torch.logspace(-3, 1.5, 64)  # saturation and the linear part
+    x[:3, 0] = torch.tensor([0.0, 30.0, -30.0])
+    buffer = x.clone()
+    out = cls.function_(buffer)
+    assert out.data_ptr() == buffer.data_ptr()
+    assert torch.equal(out, cls.function(x))
+    assert torch.equal(out, cls()(x))
+
+
 def test_sigmoid_tanh_is_tanh_to_float32_rounding():
     """2·sigmoid(2x) − 1 is tanh(x): within a few 1e-7 of the float64 tanh everywhere, exact
     at 0 and in saturation; its gradient is tanh's (1 − tanh²) to the same precision."""

@@ -43,10 +43,11 @@ from torchrl.modules import MultiAgentMLP, ProbabilisticActor, TanhNormal
 
 
 class Tanh(nn.Tanh):
-    """``nn.Tanh`` that names its function (:attr:`function`, which the fast path of
-    :class:`CategoricalMode` calls directly)."""
+    """``nn.Tanh`` that names its function (:attr:`function`) and its in-place form
+    (:attr:`function_`), which the fast path of :class:`CategoricalMode` calls directly."""
 
     function = staticmethod(torch.tanh)
+    function_ = staticmethod(torch.tanh_)
 
 
 class SigmoidTanh(nn.Module):
@@ -59,13 +60,19 @@ class SigmoidTanh(nn.Module):
     def function(x: torch.Tensor) -> torch.Tensor:
         return torch.sigmoid(x * 2.0) * 2.0 - 1.0
 
+    @staticmethod
+    def function_(x: torch.Tensor) -> torch.Tensor:
+        """:meth:`function` in place on ``x`` (the same operations, so the same numbers bit for
+        bit, without allocating three temporaries; not for tensors autograd needs)."""
+        return torch.sigmoid_(x.mul_(2.0)).mul_(2.0).sub_(1.0)
+
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.function(x)
 
 
 #: ``algo.activation`` → the hidden layers' module class (the names are
 #: :data:`vdtn_marl.algos.params.ACTIVATIONS`); each class's ``function`` is what its
-#: forward applies
+#: forward applies, ``function_`` the same in place
 ACTIVATION_CLASSES: dict[str, type[nn.Module]] = {"tanh": Tanh, "tanh_sigmoid": SigmoidTanh}
 
 
@@ -310,6 +317,15 @@ class CategoricalMode:
             )
         # per layer: None for a Linear layer, else the activation's function
         self._functions = [getattr(layer, "function", None) for layer in self.layers]
+        # what the call applies: an activation right after a Linear layer works in place on
+        # that layer's fresh output (bit for bit the same numbers, no temporaries)
+        after_linear = [False, *(function is None for function in self._functions[:-1])]
+        self._calls = [
+            getattr(layer, "function_", function) if function is not None and linear else function
+            for layer, function, linear in zip(
+                self.layers, self._functions, after_linear, strict=True
+            )
+        ]
 
     @classmethod
     def of(cls, actor) -> CategoricalMode | None:
@@ -344,14 +360,16 @@ class CategoricalMode:
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
         x = self.scaler(observation)
         params = self.body.params
-        for index, function in enumerate(self._functions):
+        for index, function in enumerate(self._calls):
             if function is None:
                 weights = params[str(index)]
                 x = F.linear(x, weights["weight"], weights["bias"])
             else:
                 x = function(x)
         logits = x - x.logsumexp(dim=-1, keepdim=True)  # as Categorical(logits=...) holds them
-        return F.softmax(logits, dim=-1).argmax(dim=-1)  # Categorical.mode: probs.argmax
+        # Categorical.mode is probs.argmax; max's indices are argmax's (the first maximal
+        # entry of a row) and torch reduces a last axis of a few entries faster this way
+        return F.softmax(logits, dim=-1).max(dim=-1).indices
 
 
 def make_critic(
