@@ -122,6 +122,23 @@ def test_fast_categorical_mode_gives_the_actors_own_deterministic_actions(scale,
     assert (policy(observation) == 0).all()
 
 
+@pytest.mark.parametrize("activation", ACTIVATIONS)
+def test_fast_categorical_mode_acts_the_same_on_any_subset_of_the_batch(activation):
+    """What ``ActorPolicy.rowwise`` promises the interval engine: the fast path's actions for
+    some scenarios alone are, bit for bit, theirs in the whole batch (here at the batch sizes
+    of π̃ and a partial reset's few scenarios); a stochastic policy promises nothing."""
+    torch.manual_seed(3)
+    policy = ActorPolicy(_discrete_actor(activation=activation), "agents")
+    assert policy.rowwise
+    assert not ActorPolicy(_discrete_actor(), "agents", deterministic=False).rowwise
+    for batch in (256, 1024):
+        observation = torch.rand(batch, N_AGENTS, N_OBS) * 2 - 1
+        whole = policy(observation)
+        for size in (1, 2, 3, 7, 40, batch // 2):
+            rows = torch.randperm(batch)[:size].sort().values
+            assert torch.equal(policy(observation.index_select(0, rows)), whole[rows])
+
+
 def test_fast_categorical_mode_reads_the_current_weights():
     """Weights loaded or trained after the policy was made are the ones it acts with."""
     torch.manual_seed(2)

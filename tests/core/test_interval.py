@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -104,6 +105,62 @@ def test_advance_starts_only_the_going_scenarios():
     # the going scenarios got a new CAM and ran its radio; the others kept theirs
     assert torch.equal(after[~going], before[~going])
     assert not torch.equal(after[going], before[going])
+
+
+class _RowPolicy:
+    """A deterministic policy whose actions depend on each scenario's own observation, which
+    notes how many scenarios each call saw."""
+
+    def __init__(self, num_actions: int, rowwise: bool):
+        self.num_actions, self.rowwise, self.batches = num_actions, rowwise, []
+
+    def __call__(self, observation):
+        self.batches.append(observation.shape[0])
+        return (observation.sum(-1) * 1e3).long().remainder(self.num_actions)
+
+
+@pytest.mark.parametrize("kind", ["reset", "advance"])
+def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind):
+    """After a partial reset (and a partial start) a ``rowwise`` policy sees the masked
+    scenarios only, and the twin ends bit for bit where it ends when the policy sees them
+    all."""
+    mask = torch.tensor([False, True, False, False, True, False])
+    twins = {}
+    for rowwise in (False, True):
+        engine = _engine(batch=6, seed=5)
+        num_actions = engine.twin.params.radio.num_actions
+        engine.rra_policy = policy = _RowPolicy(num_actions, rowwise)
+        engine.run_radio()
+        engine.close()
+        engine.advance()
+        engine.close()
+        policy.batches.clear()
+        if kind == "reset":
+            engine.reset(mask)
+        else:
+            engine.advance(mask)
+        assert set(policy.batches) == ({2} if rowwise else {6})
+        assert len(policy.batches) == engine.twin.subframes_per_interval
+        twins[rowwise] = engine.twin
+    for field in dataclasses.fields(twins[True].link_state):
+        assert torch.equal(
+            getattr(twins[True].link_state, field.name),
+            getattr(twins[False].link_state, field.name),
+        ), field.name
+    assert torch.equal(twins[True]._v2i_rate_sum, twins[False]._v2i_rate_sum)
+    # the masked scenarios did run their radio: their CAMs moved
+    assert bool((twins[True].link_state.remaining_bits[mask] != 0).any())
+
+
+def test_the_jocc_policy_slot_passes_on_its_policys_rowwise():
+    """JOCC hands π̃'s environment a slot whose policy changes; the engine reads ``rowwise``
+    through it."""
+    from vdtn_marl.experiment.jocc import SwitchablePolicy
+
+    slot = SwitchablePolicy(_RowPolicy(16, rowwise=True))
+    assert slot.rowwise
+    slot.policy = RandomRRAPolicy(16, 0)
+    assert not slot.rowwise
 
 
 def test_the_engine_drives_the_radio_only_with_a_policy_and_a_radio():

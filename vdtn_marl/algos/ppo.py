@@ -459,6 +459,14 @@ class ActorPolicy:
         )
         self.mode = CategoricalMode.of(actor) if deterministic else None
 
+    @property
+    def rowwise(self) -> bool:
+        """Whether each scenario's actions depend on its own observation only and a call
+        draws no random numbers, so that a caller may ask for some scenarios alone (the
+        deterministic fast path: the same actions bit for bit on any subset of the batch,
+        tests/algos/test_networks.py; :meth:`~vdtn_marl.core.interval.IntervalEngine.run_radio`)."""
+        return self.mode is not None
+
     @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
         if self.mode is not None:

@@ -168,15 +168,36 @@ class IntervalEngine:
     def run_radio(self, mask: torch.Tensor | None = None, policy: Callable | None = None) -> None:
         """Run the interval's T subframes with ``policy`` (default ``rra_policy``); with
         ``mask`` [B] only the masked scenarios keep the result (the others had already run this
-        interval)."""
+        interval).
+
+        A policy whose ``rowwise`` is true (each scenario's actions depend on its own
+        observation only, and a call draws no random numbers: the deterministic learned policy,
+        :class:`~vdtn_marl.algos.ppo.ActorPolicy`) is asked for the masked scenarios' actions
+        alone; the others act 0, which the masked step discards. After a partial reset this
+        spares the policy's work on the scenarios that did not reset."""
         twin = self.twin
         policy = policy or self.rra_policy
         validated = not self.validate_rra
+        rows = self._policy_rows(mask, policy)
         for _ in range(twin.subframes_per_interval):
-            actions = policy(twin.rra_observation())
-            if self._torch:
-                actions = torch.as_tensor(actions, device=twin.device).long()
+            observation = twin.rra_observation()
+            if rows is None:
+                actions = policy(observation)
+                if self._torch:
+                    actions = torch.as_tensor(actions, device=twin.device).long()
+            else:
+                chosen = policy(observation.index_select(0, rows))
+                chosen = torch.as_tensor(chosen, device=twin.device).long()
+                actions = chosen.new_zeros(observation.shape[:-1]).index_copy_(0, rows, chosen)
             twin.step_subframe(actions, validated=validated, mask=mask)
+
+    def _policy_rows(self, mask: torch.Tensor | None, policy) -> torch.Tensor | None:
+        """The masked scenarios' indices when ``policy`` may be asked for them alone, else
+        None (no mask, every scenario masked, NumPy twin, or a policy that is not rowwise)."""
+        if mask is None or not self._torch or not getattr(policy, "rowwise", False):
+            return None
+        rows = torch.as_tensor(mask, device=self.twin.device).nonzero().flatten()
+        return None if rows.numel() == mask.numel() else rows
 
     def step_subframe(self, actions, validated: bool = True):
         """One subframe with RRA ``actions`` [B, L]: the twin's outcome

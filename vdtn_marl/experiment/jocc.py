@@ -108,6 +108,11 @@ class SwitchablePolicy:
     def __call__(self, observation):
         return self.policy(observation)
 
+    @property
+    def rowwise(self) -> bool:
+        """The current policy's ``rowwise`` (IntervalEngine.run_radio)."""
+        return bool(getattr(self.policy, "rowwise", False))
+
     def seed(self, seed: int | None) -> None:
         if hasattr(self.policy, "seed"):
             self.policy.seed(seed)
