@@ -108,9 +108,12 @@ def _weights(mode) -> list:
 
 
 class Compiled:
-    """Swaps the eager kernel and policy call for compiled copies inside ``with``."""
+    """Swaps the eager kernel and policy call for compiled copies inside ``with``. The policy
+    is compiled for the whole batch of ``batch`` scenarios; its calls on a partial reset's few
+    scenarios (a number that changes from call to call) stay eager, as recompiling for each
+    would cost more than it saves."""
 
-    def __init__(self):
+    def __init__(self, batch: int):
         import torch
 
         from vdtn_marl.algos import networks
@@ -122,7 +125,11 @@ class Compiled:
         self.kernel = torch.compile(self.eager_kernel, dynamic=False)
         arithmetic = torch.compile(_mode_arithmetic, dynamic=False)
 
+        eager_call = self.eager_call
+
         def call(mode, observation):
+            if observation.shape[0] != batch:
+                return eager_call(mode, observation)
             return arithmetic(mode.scaler(observation), mode._functions, _weights(mode))
 
         self.call = call
@@ -213,7 +220,7 @@ def measure(batch: int, repeats: int, calls: int, frames: int = CONTROL_FRAMES) 
         "links": mode.n_agents,
         "subframes": twin.subframes_per_interval,
     }
-    compiled = Compiled()
+    compiled = Compiled(batch)
     observation = twin.rra_observation().clone()
     try:
         began = time.perf_counter()
