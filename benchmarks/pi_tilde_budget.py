@@ -24,10 +24,9 @@ on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
    ``F.linear`` and two activations, in place as the call applies them, on ``[B, L, D]``,
    nothing else) and the compiled kernel's subframe, each the fastest of 5 timed blocks.
    Everything else (observations, the interval's start and close, the control policy,
-   TensorDicts, Python) counts as free. It
-   is a floor for torch on this CPU as long as the network's products and activations stay
-   torch's (MKL's GEMM, torch's activation kernels); a hand-fused kernel could save the
-   activations' memory passes, not the products.
+   TensorDicts, Python) counts as free. It is a floor for torch on this CPU as long as the
+   network's products and activations stay torch's (MKL's GEMM, torch's activation kernels);
+   a hand-fused kernel could save the activations' memory passes, not the products.
 3. **The budget**: from ``results/stage_throughput.json`` (its chosen sizes, a later JOCC
    iteration), the seconds of every other stage, hence the seconds per π̃ iteration that
    would leave a JOCC iteration within 30 minutes; the speed-up needed over that file's π̃ and

@@ -148,8 +148,6 @@ def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind):
             getattr(twins[False].link_state, field.name),
         ), field.name
     assert torch.equal(twins[True]._v2i_rate_sum, twins[False]._v2i_rate_sum)
-    # the masked scenarios did run their radio: their CAMs moved
-    assert bool((twins[True].link_state.remaining_bits[mask] != 0).any())
 
 
 def test_the_jocc_policy_slot_passes_on_its_policys_rowwise():

@@ -462,9 +462,11 @@ class ActorPolicy:
     @property
     def rowwise(self) -> bool:
         """Whether each scenario's actions depend on its own observation only and a call
-        draws no random numbers, so that a caller may ask for some scenarios alone (the
-        deterministic fast path: the same actions bit for bit on any subset of the batch,
-        tests/algos/test_networks.py; :meth:`~vdtn_marl.core.interval.IntervalEngine.run_radio`)."""
+        draws no random numbers, so that a caller may ask for some scenarios alone
+        (:meth:`~vdtn_marl.core.interval.IntervalEngine.run_radio`): the deterministic fast
+        path. On the CPU its actions on a subset of the batch are bit for bit those of the
+        whole batch (tests/algos/test_networks.py); elsewhere a BLAS that picks its kernel by
+        shape may round a subset's products differently, which stays reproducible by seed."""
         return self.mode is not None
 
     @torch.no_grad()
