@@ -120,14 +120,20 @@ class _RowPolicy:
 
 
 @pytest.mark.parametrize("kind", ["reset", "advance"])
-def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind):
+@pytest.mark.parametrize(
+    "batch, masked",
+    [(6, [1, 4]), (6, [0, 1, 3, 4]), (300, [7, 150, 299])],
+    ids=["few", "most", "link-major"],
+)
+def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind, batch, masked):
     """After a partial reset (and a partial start) a ``rowwise`` policy sees the masked
-    scenarios only, and the twin ends bit for bit where it ends when the policy sees them
-    all."""
-    mask = torch.tensor([False, True, False, False, True, False])
+    scenarios only (at most half the batch: the interval runs for them alone), and the twin
+    ends bit for bit where it ends when the policy sees them all."""
+    mask = torch.zeros(batch, dtype=torch.bool)
+    mask[masked] = True
     twins = {}
     for rowwise in (False, True):
-        engine = _engine(batch=6, seed=5)
+        engine = _engine(batch=batch, seed=5)
         num_actions = engine.twin.params.radio.num_actions
         engine.rra_policy = policy = _RowPolicy(num_actions, rowwise)
         engine.run_radio()
@@ -139,7 +145,7 @@ def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind):
             engine.reset(mask)
         else:
             engine.advance(mask)
-        assert set(policy.batches) == ({2} if rowwise else {6})
+        assert set(policy.batches) == ({len(masked)} if rowwise else {batch})
         assert len(policy.batches) == engine.twin.subframes_per_interval
         twins[rowwise] = engine.twin
     for field in dataclasses.fields(twins[True].link_state):
@@ -148,6 +154,9 @@ def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind):
             getattr(twins[False].link_state, field.name),
         ), field.name
     assert torch.equal(twins[True]._v2i_rate_sum, twins[False]._v2i_rate_sum)
+    # the masked scenarios' observations, subframe by subframe
+    assert torch.equal(twins[True]._rra_obs[:, mask], twins[False]._rra_obs[:, mask])
+    assert twins[True].subframe == twins[False].subframe == twins[True].subframes_per_interval
 
 
 def test_the_jocc_policy_slot_passes_on_its_policys_rowwise():

@@ -173,12 +173,22 @@ class IntervalEngine:
         A policy whose ``rowwise`` is true (each scenario's actions depend on its own
         observation only, and a call draws no random numbers: the deterministic learned policy,
         :class:`~vdtn_marl.algos.ppo.ActorPolicy`) is asked for the masked scenarios' actions
-        alone; the others act 0, which the masked step discards. After a partial reset this
-        spares the policy's work on the scenarios that did not reset."""
+        alone; the others act 0, which the masked step discards. When they are at most half
+        the batch (a partial reset's few scenarios) the whole interval runs for them alone
+        (:meth:`~vdtn_marl.sim.twin.DigitalTwin.run_subframes`: observations and kernel on b
+        scenarios, not B), with the same numbers."""
         twin = self.twin
         policy = policy or self.rra_policy
         validated = not self.validate_rra
         rows = self._policy_rows(mask, policy)
+        if rows is not None and 2 * rows.numel() <= mask.numel():
+            device = twin.device
+
+            def act(observation):
+                return torch.as_tensor(policy(observation), device=device).long()
+
+            twin.run_subframes(rows, act, validated=validated)
+            return
         for _ in range(twin.subframes_per_interval):
             observation = twin.rra_observation()
             if rows is None:

@@ -367,6 +367,7 @@ def build_interval_tables(
     out: IntervalTables | None = None,
     fading_draws: str = "normal",
     drawn: torch.Tensor | None = None,
+    rows: torch.Tensor | None = None,
 ) -> IntervalTables:
     """Draw the interval's Rayleigh fading and assemble the linear tables.
 
@@ -389,6 +390,11 @@ def build_interval_tables(
     the right shapes and is link-major (the previous interval's tables, overwritten), else
     into new tensors. ``drawn`` (torch): a :func:`fading_buffer` that already holds the
     interval's fading power gains (:func:`draw_interval`), which are then not drawn again.
+
+    ``rows`` [b] (torch, with ``drawn`` [T, W, b] those scenarios' gains): the tables of the
+    scenarios ``rows`` of the batch alone. The gains in dB are made linear for the whole batch
+    first: ``torch.pow`` on the CPU can round an entry in the last bit differently by its
+    place in the array (measured), which these rows' own call would change.
     """
     b, n = v2i_gain_db.shape
     links, subch, t = topology.num_links, radio.num_subchannels, num_subframes
@@ -399,6 +405,14 @@ def build_interval_tables(
 
     v2v_lin = db_to_linear(v2v_gain_db)  # [B, N, N]
     v2i_lin = db_to_linear(v2i_gain_db)  # [B, N]
+    if rows is not None:
+        if drawn is None:
+            raise ValueError("build_interval_tables(rows=...) needs the batch's drawn fading")
+        v2v_lin, v2i_lin, b = (
+            v2v_lin.index_select(0, rows),
+            v2i_lin.index_select(0, rows),
+            len(rows),
+        )
     own_ls = v2v_lin[:, tx, rx]  # [B, L]
     v2i_to_rx_ls = v2v_lin[:, v2i_user][:, :, rx].swapaxes(1, 2)  # [B, L, M]
     tx_to_bs_ls = v2i_lin[:, tx]  # [B, L]

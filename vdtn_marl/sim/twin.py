@@ -40,6 +40,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from types import SimpleNamespace
 
@@ -386,7 +387,9 @@ class DigitalTwin:
         """Generate CAM_k, update the large-scale channel, draw the interval's fast fading.
 
         With ``mask`` only the masked scenarios start a new interval (after a partial reset);
-        the others keep their current interval unchanged.
+        the others keep their current interval unchanged. The whole batch's draws are made
+        either way (the generator's order); when the masked scenarios are at most half the
+        batch, the interval's tables and observations are built for them alone.
         """
         with self._torch_calls():
             self._begin_interval(mask)
@@ -402,6 +405,10 @@ class DigitalTwin:
         if not self.radio_enabled:
             return
         b, rp, t = self.batch_size, self.params.radio, self.subframes_per_interval
+        rows = self._few_rows(keep)
+        if rows is not None:
+            self._begin_rows_interval(rows)
+            return
         # all scenarios start over: the torch path overwrites the last interval's buffers
         reuse = keep is None and not ns.numpy
         tables = self._draw_interval_tables(reuse)
@@ -438,7 +445,41 @@ class DigitalTwin:
             v2i_sum,
         )
 
-    def _draw_interval_tables(self, reuse: bool) -> link.IntervalTables:
+    def _few_rows(self, keep) -> torch.Tensor | None:
+        """The indices of the scenarios ``keep`` [B] (bool) selects when they are at most half
+        the batch on the torch backend (their interval is then built for them alone), else
+        None."""
+        if keep is None or self.ns.numpy:
+            return None
+        rows = keep.nonzero().flatten()
+        return rows if 2 * rows.numel() <= keep.numel() else None
+
+    def _begin_rows_interval(self, rows: torch.Tensor) -> None:
+        """:meth:`begin_interval` of the scenarios ``rows`` alone (the others keep their
+        interval): the whole batch's draws, in their order, and large-scale update (as for any
+        mask), then the tables, CAM progress and observation buffer of those rows only,
+        written into the twin's (the same numbers as building them for all and keeping the
+        rows: every entry's float32 operations are the same; tests/sim/test_twin_rows.py)."""
+        rp, t = self.params.radio, self.subframes_per_interval
+        tables = self._draw_interval_tables(False, rows)
+        for f in dataclasses.fields(tables):  # the others' tables are this interval's: kept
+            getattr(self.tables, f.name).index_copy_(1, rows, getattr(tables, f.name))
+        fresh = link.new_link_state(
+            rows.numel(), self.num_links, self.num_subchannels, rp, t, self.device
+        )
+        before = self.link_state
+        self.link_state = link.LinkState(
+            *(
+                getattr(before, f.name).clone().index_copy_(0, rows, getattr(fresh, f.name))
+                for f in dataclasses.fields(fresh)
+            )
+        )
+        self._rra_obs.index_copy_(1, rows, self._rra_observation_buffer(tables, False, rows))
+        self._v2i_rate_sum = self._v2i_rate_sum.clone().index_fill_(0, rows, 0.0)
+
+    def _draw_interval_tables(
+        self, reuse: bool, rows: torch.Tensor | None = None
+    ) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
         x = self._platoon.position_m
         moved = abs(x - self._shadow_position_m)
@@ -488,6 +529,10 @@ class DigitalTwin:
             v2i_shadow,
             rp,
         )
+        workspace = self._workspace
+        if rows is not None:  # the tables of these scenarios only, from the batch's draws
+            drawn = drawn.index_select(-1, rows)  # [T, W, b]
+            workspace = link.FadingWorkspace()  # not the batch's scratch
         return link.build_interval_tables(
             v2v_db,
             v2i_db,
@@ -495,10 +540,11 @@ class DigitalTwin:
             self.subframes_per_interval,
             g,
             self.topology,
-            workspace=self._workspace,
+            workspace=workspace,
             out=self.tables if reuse else None,
             fading_draws=self.fading_draws,
             drawn=drawn,
+            rows=rows,
         )
 
     def _fading_buffers(self, turn: int) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -511,14 +557,18 @@ class DigitalTwin:
             return fading, None
         return fading, link.normals_buffer(*sizes, self._time_left)
 
-    def _rra_observation_buffer(self, tables: link.IntervalTables, reuse: bool):
+    def _rra_observation_buffer(
+        self, tables: link.IntervalTables, reuse: bool, rows: torch.Tensor | None = None
+    ):
         """[T, B, L, D] in the order of :data:`~vdtn_marl.sim.layout.RRA_OBS_FEATURES`: CSI,
         occupancy and bits left (filled per subframe), time left, the recipients' control
         state and the features that predict their IVoI (constant over the interval).
 
-        In the backend's arrays; with ``reuse`` (torch) written over the last interval's.
+        In the backend's arrays; with ``reuse`` (torch) written over the last interval's. With
+        ``rows`` [b] (torch) the buffer [T, b, L, D] of those scenarios, ``tables`` theirs.
         """
-        t, b, n_l = self.subframes_per_interval, self.batch_size, self.num_links
+        t, n_l = self.subframes_per_interval, self.num_links
+        b = self.batch_size if rows is None else rows.numel()
         pp, lay, platoon = self.params.platoon, self.rra_layout, self._platoon
         shape = (t, b, n_l, self.rra_obs_dim)
         old = getattr(self, "_rra_obs", None)
@@ -545,7 +595,7 @@ class DigitalTwin:
         )
         # one subframe's slot [B, L, D], copied to all T (one contiguous copy, not a strided
         # write per feature); the CSI and the time left are written over it
-        slot = self.ns.empty((b, n_l, self.rra_obs_dim))
+        slot = self.ns.empty((self.batch_size, n_l, self.rra_obs_dim))
         slot[..., lay.csi] = 0.0
         slot[..., lay.occupancy] = 0.0
         slot[..., lay.bits_left] = 1.0
@@ -554,6 +604,8 @@ class DigitalTwin:
         slot[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
         slot[..., lay["cam_delay_history"]] = self._cam_delay_history
         slot[..., lay["command_history"]] = history
+        if rows is not None:
+            slot = slot.index_select(0, rows)
         time_left = self._time_left
 
         def fill(t0: int, t1: int) -> None:  # subframes t0..t1−1: all but the CSI
@@ -572,7 +624,7 @@ class DigitalTwin:
                 self.params.radio,
                 self._const.noise_mw,
                 obs[..., lay.csi],
-                self._workspace,
+                self._workspace if rows is None else link.FadingWorkspace(),
                 each_chunk=fill,
             )
         return obs
@@ -618,8 +670,64 @@ class DigitalTwin:
         self.subframe = t + 1
         return outcome
 
-    def _check_rra_actions(self, actions) -> None:
-        expected = (self.batch_size, self.num_links)
+    def run_subframes(self, rows: torch.Tensor, act: Callable, validated: bool = False) -> None:
+        """Run the interval's remaining subframes for the scenarios ``rows`` [b] (indices)
+        alone: each subframe ``act`` maps their RRA observations [b, L, D] to their actions
+        [b, L]. The other scenarios keep their CAM progress and V2I totals, as with
+        :meth:`step_subframe`'s ``mask``; the clock ends at the interval's end. Torch backend.
+
+        The masked scenarios' numbers are :meth:`step_subframe`'s with ``mask`` (the kernel
+        works each scenario on its own and draws nothing; tests/sim/test_twin_rows.py), at
+        the cost of b scenarios instead of B: the first interval of the few scenarios a
+        partial reset starts. The other scenarios' observation slots are left as they were.
+        """
+        if not self.radio_enabled or self.ns.numpy:
+            raise RuntimeError("run_subframes needs a torch twin with radio")
+        rows = torch.as_tensor(rows, device=self.device)
+        b, links, rp = rows.numel(), self.num_links, self.params.radio
+        major = link.link_major(b)
+
+        def part(full, batch_dim: int):  # the rows' copy, in the layout the kernel uses at b
+            if not major:
+                return full.index_select(batch_dim, rows)
+            return full.movedim(batch_dim, -1).index_select(-1, rows).movedim(-1, batch_dim)
+
+        tables = link.IntervalTables(
+            *(part(getattr(self.tables, f.name), 1) for f in dataclasses.fields(self.tables))
+        )
+        before = self.link_state
+        state = link.LinkState(
+            *(part(getattr(before, f.name), 0) for f in dataclasses.fields(before))
+        )
+        const = link.KernelConstants.build(
+            rp, self.params.platoon.subframe_s, b, links, self.device
+        )
+        obs = self._rra_obs.index_select(1, rows)
+        rate_sum = self._v2i_rate_sum.index_select(0, rows)
+        for t in range(self.subframe, self.subframes_per_interval):
+            slot = obs[t]
+            self._write_rra_progress(slot, state)
+            actions = act(slot)
+            if not validated:
+                self._check_rra_actions(actions, b)
+            outcome = link.subframe_step(tables, t, actions, state, self._decode, const)
+            rate_sum = rate_sum + outcome.v2i_rate_bps
+
+        def merge(full, rows_part):  # a new array (records may share the old one)
+            return full.clone().index_copy_(0, rows, rows_part)
+
+        self.link_state = link.LinkState(
+            *(
+                merge(getattr(before, f.name), getattr(state, f.name))
+                for f in dataclasses.fields(before)
+            )
+        )
+        self._v2i_rate_sum = merge(self._v2i_rate_sum, rate_sum)
+        self._rra_obs.index_copy_(1, rows, obs)
+        self.subframe = self.subframes_per_interval
+
+    def _check_rra_actions(self, actions, batch: int | None = None) -> None:
+        expected = (self.batch_size if batch is None else batch, self.num_links)
         if tuple(actions.shape) != expected:
             raise ValueError(f"RRA actions have shape {tuple(actions.shape)}, expected {expected}")
         n_act = self.params.radio.num_actions
@@ -654,10 +762,16 @@ class DigitalTwin:
             np.divide(state.occupancy[:, None, :], c.num_links, out=obs[..., lay.occupancy])
             np.minimum(np.maximum(remaining, c.zero), c.one, out=obs[..., lay.bits_left])
             return obs
+        self._write_rra_progress(obs, state)
+        return obs
+
+    def _write_rra_progress(self, obs, state: link.LinkState) -> None:
+        """Write a subframe's occupancy and bits left (from ``state``) into its slot ``obs``
+        [B, L, D] (torch)."""
+        lay = self.rra_layout
         remaining = state.remaining_bits / self.params.radio.cam_size_bits
         obs[..., lay.occupancy] = state.occupancy[:, None, :] / self.num_links
         obs[..., lay.bits_left] = clamp(remaining, 0.0, 1.0)
-        return obs
 
     def cam_age_ms(self):
         """Age of Information (ms) of the CAM content each recipient holds after the subframes
