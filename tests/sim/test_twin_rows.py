@@ -107,9 +107,9 @@ def test_a_partial_reset_builds_the_rows_interval_as_the_merge_does(batch, rows,
     merged = _after_a_partial_reset(batch, mask)
     assert built == []  # the patched merge path ran, not the rows path
     for field in dataclasses.fields(merged.tables):
-        assert torch.equal(
-            getattr(alone.tables, field.name), getattr(merged.tables, field.name)
-        ), field.name
+        assert torch.equal(getattr(alone.tables, field.name), getattr(merged.tables, field.name)), (
+            field.name
+        )
     for field in dataclasses.fields(merged.link_state):
         assert torch.equal(
             getattr(alone.link_state, field.name), getattr(merged.link_state, field.name)
