@@ -677,9 +677,11 @@ class DigitalTwin:
         :meth:`step_subframe`'s ``mask``; the clock ends at the interval's end. Torch backend.
 
         The masked scenarios' numbers are :meth:`step_subframe`'s with ``mask`` (the kernel
-        works each scenario on its own and draws nothing; tests/sim/test_twin_rows.py), at
-        the cost of b scenarios instead of B: the first interval of the few scenarios a
-        partial reset starts. The other scenarios' observation slots are left as they were.
+        works each scenario on its own, draws nothing, and its one transcendental function,
+        ``log1p``, rounds an entry alike wherever it sits in the array; tested in
+        tests/sim/test_twin_rows.py), at the cost of b scenarios instead of B: the first
+        interval of the few scenarios a partial reset starts. The other scenarios'
+        observation slots are left as they were.
         """
         if not self.radio_enabled or self.ns.numpy:
             raise RuntimeError("run_subframes needs a torch twin with radio")
