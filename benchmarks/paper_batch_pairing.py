@@ -25,9 +25,11 @@ held-out scenarios (``--eval-episodes`` × 400 intervals of the held-out traces)
 Arms run interleaved (seed 0 old, seed 0 new, seed 1 old, ...). The table prints, per stage
 and evaluation point, the control cost of each arm (mean over seeds) and the paired
 difference new − old (mean, min and max over seeds; negative: the new shape learned more per
-frame), and each arm's median CPU seconds per iteration and their ratio (per wall-time
-learning). The JSON keeps every evaluation, the command, the date and the load average; it is
-rewritten after every arm (``complete`` says whether every arm ran).
+frame) with its 95 % Student-t interval over the seeds, and each arm's median CPU seconds per
+iteration and their ratio (per wall-time learning). The JSON keeps every evaluation, the
+command, the date and the load average; it is rewritten after every arm (``complete`` says
+whether every arm ran). ``--summarize RESULT`` recomputes a result's table from its runs
+(e.g. after a change of what the table reports) and rewrites it, running nothing.
 """
 
 from __future__ import annotations
@@ -57,7 +59,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--eval-every", type=int, default=10, help="iterations between evaluations")
     p.add_argument("--eval-episodes", type=int, default=64, help="held-out scenarios")
     p.add_argument("--out", type=Path, default=RESULTS)
+    p.add_argument(
+        "--summarize", type=Path, metavar="RESULT", help="recompute RESULT's table; run nothing"
+    )
     args = p.parse_args(argv)
+    if args.summarize is not None and not args.summarize.is_file():
+        p.error(f"--summarize {args.summarize}: no such result file")
     from vdtn_marl.reporting.benchmarking import parse_names, parse_seeds
 
     args.stages = parse_names("--stages", args.stages, STAGES)
@@ -157,7 +164,10 @@ def run_arm(stage: str, seed: int, shape: tuple[int, int], args, extra=()) -> di
 
 
 def pair_rows(runs: list[dict], stage: str) -> list[dict]:
-    """Per evaluation point: each arm's mean cost over seeds and the paired new − old."""
+    """Per evaluation point: each arm's mean cost over seeds and the paired new − old (mean,
+    min, max and 95 % Student-t interval over the seeds)."""
+    from vdtn_marl.leaderboard.stats import t_ci
+
     rows = []
     old = {r["seed"]: r for r in runs if r["stage"] == stage and r["arm"] == "old"}
     new = {r["seed"]: r for r in runs if r["stage"] == stage and r["arm"] == "new"}
@@ -168,6 +178,7 @@ def pair_rows(runs: list[dict], stage: str) -> list[dict]:
         costs_old = [old[s]["evaluations"][point]["control_cost"] for s in seeds]
         costs_new = [new[s]["evaluations"][point]["control_cost"] for s in seeds]
         diffs = [n - o for n, o in zip(costs_new, costs_old, strict=True)]
+        _, low, high = t_ci(diffs)
         rows.append(
             {
                 "stage": stage,
@@ -179,6 +190,8 @@ def pair_rows(runs: list[dict], stage: str) -> list[dict]:
                 "diff_mean": statistics.fmean(diffs),
                 "diff_min": min(diffs),
                 "diff_max": max(diffs),
+                "diff_t95_low": low,
+                "diff_t95_high": high,
                 "cpu_s_per_iteration_old": statistics.median(
                     old[s]["cpu_s_per_iteration"] for s in seeds
                 ),
@@ -195,6 +208,8 @@ def pair_rows(runs: list[dict], stage: str) -> list[dict]:
 
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.summarize is not None:
+        return summarize(args.summarize)
     import torch
 
     from vdtn_marl.io.files import atomic_write_json
@@ -241,19 +256,42 @@ def main(argv=None) -> int:
                     flush=True,
                 )
     rows = [row for stage in args.stages for row in pair_rows(runs, stage)]
+    print_table(rows)
+    write(rows)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def print_table(rows: list[dict]) -> None:
     print(
         f"\n{'stage':<8} {'iter':>5} {'frames':>9} {'cost old':>9} {'cost new':>9} "
-        f"{'new-old':>9} {'min':>9} {'max':>9} {'CPU new/old':>11}"
+        f"{'new-old':>9} {'95% t interval':>21} {'min':>9} {'max':>9} {'CPU new/old':>11}"
     )
     for row in rows:
+        interval = f"[{row['diff_t95_low']:+.4f}, {row['diff_t95_high']:+.4f}]"
         print(
             f"{row['stage']:<8} {row['iteration']:>5} {row['frames']:>9,} "
             f"{row['cost_old']:>9.4f} {row['cost_new']:>9.4f} {row['diff_mean']:>+9.4f} "
-            f"{row['diff_min']:>+9.4f} {row['diff_max']:>+9.4f} "
+            f"{interval:>21} {row['diff_min']:>+9.4f} {row['diff_max']:>+9.4f} "
             f"{row['cpu_ratio_new_to_old']:>11.2f}"
         )
-    write(rows)
-    print(f"wrote {args.out}")
+
+
+def summarize(path: Path) -> int:
+    """Recompute the table of the result ``path`` from its runs, print and rewrite it."""
+    import json
+
+    from vdtn_marl.io.files import atomic_write_json
+
+    result = json.loads(path.read_text())
+    runs = result.get("runs")
+    if not isinstance(runs, list):
+        raise SystemExit(f"--summarize {path}: not a paper_batch_pairing result (no runs)")
+    stages = [stage for stage in STAGES if any(run.get("stage") == stage for run in runs)]
+    rows = [row for stage in stages for row in pair_rows(runs, stage)]
+    print_table(rows)
+    atomic_write_json(path, {**result, "rows": rows})
+    print(f"rewrote {path}")
     return 0
 
 

@@ -6,6 +6,7 @@ The timed runs themselves are benchmarks, never tests."""
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
 
 import pytest
@@ -150,6 +151,11 @@ def test_pairing_differences_are_taken_seed_by_seed():
     assert last["cost_old"] == pytest.approx(0.35) and last["cost_new"] == pytest.approx(0.325)
     assert last["diff_mean"] == pytest.approx(-0.025)
     assert (last["diff_min"], last["diff_max"]) == pytest.approx((-0.10, 0.05))
+    # mean ± t_{1, 0.975} · s/√2 of (−0.10, +0.05): s = 0.15/√2, so ± 12.706 · 0.075
+    half = 12.7062047 * 0.075
+    assert (last["diff_t95_low"], last["diff_t95_high"]) == pytest.approx(
+        (-0.025 - half, -0.025 + half), rel=1e-6
+    )
     assert last["cpu_ratio_new_to_old"] == pytest.approx((0.5 + 0.25) / 2)
     assert pairing.pair_rows(runs, "pi_tilde") == []
 
@@ -204,6 +210,27 @@ def test_paper_stage_timings_refuses_bad_arguments(tmp_path, capsys):
     with pytest.raises(SystemExit):
         timings.parse_args([f"new={tmp_path / 'run'}", "--cpu-share", "new=300/100"])
     assert "--cpu-share" in capsys.readouterr().err
+
+
+def test_pairing_summarize_recomputes_a_results_table(tmp_path, capsys):
+    runs = [
+        {"stage": "pi_star", "arm": arm, "seed": seed, "cpu_s_per_iteration": 1.0,
+         "evaluations": [{"iteration": 0, "frames": 0, "control_cost": cost}]}
+        for seed, arm, cost in [(0, "old", 0.3), (0, "new", 0.4), (1, "old", 0.3), (1, "new", 0.2)]
+    ]  # fmt: skip
+    result = tmp_path / "pairing.json"
+    result.write_text(json.dumps({"benchmark": "paper_batch_pairing", "rows": [], "runs": runs}))
+    assert pairing.main(["--summarize", str(result)]) == 0
+    rows = json.loads(result.read_text())["rows"]
+    assert len(rows) == 1 and rows[0]["diff_mean"] == pytest.approx(0.0)
+    assert rows[0]["diff_t95_low"] < 0 < rows[0]["diff_t95_high"]
+    assert "95% t interval" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        pairing.parse_args(["--summarize", str(tmp_path / "missing.json")])
+    assert "--summarize" in capsys.readouterr().err
+    result.write_text(json.dumps({"rows": []}))
+    with pytest.raises(SystemExit, match="no runs"):
+        pairing.main(["--summarize", str(result)])
 
 
 def test_pairing_arms_take_their_own_overrides():
