@@ -102,8 +102,8 @@ def test_a_partial_reset_builds_the_rows_interval_as_the_merge_does(batch, rows,
     alone = _after_a_partial_reset(batch, mask)
     built = []
     monkeypatch.setattr(DigitalTwin, "_begin_rows_interval", lambda twin, r: built.append(r))
-    assert alone._few_rows(mask) is not None
-    monkeypatch.setattr(DigitalTwin, "_few_rows", lambda twin, keep: None)
+    assert alone.few_rows(mask) is not None
+    monkeypatch.setattr(DigitalTwin, "few_rows", lambda twin, mask: None)
     merged = _after_a_partial_reset(batch, mask)
     assert built == []  # the patched merge path ran, not the rows path
     for field in dataclasses.fields(merged.tables):

@@ -181,7 +181,7 @@ class IntervalEngine:
         policy = policy or self.rra_policy
         validated = not self.validate_rra
         rows = self._policy_rows(mask, policy)
-        if rows is not None and 2 * rows.numel() <= mask.numel():
+        if rows is not None and twin.few_rows(mask) is not None:
             device = twin.device
 
             def act(observation):

@@ -164,6 +164,17 @@ class _TorchState:
         setattr(twin, self.held, twin.ns.from_torch(value))
 
 
+def _replace_rows(state: link.LinkState, rows: torch.Tensor, part: link.LinkState):
+    """``state`` with the scenarios ``rows`` [b] taken from ``part`` [b, ...]: new arrays
+    (records may share the old ones)."""
+    return link.LinkState(
+        *(
+            getattr(state, f.name).clone().index_copy_(0, rows, getattr(part, f.name))
+            for f in dataclasses.fields(state)
+        )
+    )
+
+
 class DigitalTwin:
     """B scenarios of the VDTN platoon model, batched in torch or NumPy.
 
@@ -405,7 +416,7 @@ class DigitalTwin:
         if not self.radio_enabled:
             return
         b, rp, t = self.batch_size, self.params.radio, self.subframes_per_interval
-        rows = self._few_rows(keep)
+        rows = self.few_rows(keep)
         if rows is not None:
             self._begin_rows_interval(rows)
             return
@@ -445,14 +456,14 @@ class DigitalTwin:
             v2i_sum,
         )
 
-    def _few_rows(self, keep) -> torch.Tensor | None:
-        """The indices of the scenarios ``keep`` [B] (bool) selects when they are at most half
-        the batch on the torch backend (their interval is then built for them alone), else
-        None."""
-        if keep is None or self.ns.numpy:
+    def few_rows(self, mask) -> torch.Tensor | None:
+        """The indices of the scenarios ``mask`` [B] (bool) selects when they are at most half
+        the batch on the torch backend (their interval is then built, and by
+        :meth:`run_subframes` run, for them alone), else None."""
+        if mask is None or self.ns.numpy:
             return None
-        rows = keep.nonzero().flatten()
-        return rows if 2 * rows.numel() <= keep.numel() else None
+        rows = torch.as_tensor(mask, device=self.device).nonzero().flatten()
+        return rows if 2 * rows.numel() <= mask.numel() else None
 
     def _begin_rows_interval(self, rows: torch.Tensor) -> None:
         """:meth:`begin_interval` of the scenarios ``rows`` alone (the others keep their
@@ -467,13 +478,7 @@ class DigitalTwin:
         fresh = link.new_link_state(
             rows.numel(), self.num_links, self.num_subchannels, rp, t, self.device
         )
-        before = self.link_state
-        self.link_state = link.LinkState(
-            *(
-                getattr(before, f.name).clone().index_copy_(0, rows, getattr(fresh, f.name))
-                for f in dataclasses.fields(fresh)
-            )
-        )
+        self.link_state = _replace_rows(self.link_state, rows, fresh)
         self._rra_obs.index_copy_(1, rows, self._rra_observation_buffer(tables, False, rows))
         self._v2i_rate_sum = self._v2i_rate_sum.clone().index_fill_(0, rows, 0.0)
 
@@ -714,17 +719,8 @@ class DigitalTwin:
                 self._check_rra_actions(actions, b)
             outcome = link.subframe_step(tables, t, actions, state, self._decode, const)
             rate_sum = rate_sum + outcome.v2i_rate_bps
-
-        def merge(full, rows_part):  # a new array (records may share the old one)
-            return full.clone().index_copy_(0, rows, rows_part)
-
-        self.link_state = link.LinkState(
-            *(
-                merge(getattr(before, f.name), getattr(state, f.name))
-                for f in dataclasses.fields(before)
-            )
-        )
-        self._v2i_rate_sum = merge(self._v2i_rate_sum, rate_sum)
+        self.link_state = _replace_rows(before, rows, state)
+        self._v2i_rate_sum = self._v2i_rate_sum.clone().index_copy_(0, rows, rate_sum)
         self._rra_obs.index_copy_(1, rows, obs)
         self.subframe = self.subframes_per_interval
 
