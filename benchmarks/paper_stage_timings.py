@@ -19,6 +19,17 @@ adds one evaluation (π*'s warm start, once per run, is not included). Under loa
 seconds hold other jobs' time: ``--cpu-share LABEL=CPU/WALL`` (a run's user + system seconds
 and its wall seconds, e.g. from ``/usr/bin/time -v``) also scales that run's estimate to a
 core of its own, assuming its share of the core was even over the run.
+
+A whole run measures instead of extrapolating: every JOCC iteration in ``jocc.log`` is reported
+with its stages' wall seconds (their ``done in`` lines) and its own wall seconds, from the end of
+the iteration before (the run's start for the first) to its last stage's end, so π*'s warm
+start, the value fit and the checkpoints count. ``--time-v LABEL=FILE`` adds the run's peak RSS
+and CPU seconds from ``/usr/bin/time -v -o FILE``:
+
+    /usr/bin/time -v -o runs/paper/time.txt vdtn-marl jocc experiment=paper \
+        experiment.jocc_iterations=2 hydra.run.dir=runs/paper
+    python benchmarks/paper_stage_timings.py paper=runs/paper \
+        --time-v paper=runs/paper/time.txt --out results/paper_iteration.json
 """
 
 from __future__ import annotations
@@ -27,11 +38,18 @@ import argparse
 import csv
 import re
 import statistics
+from datetime import datetime
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results" / "paper_stage_timings.json"
+TARGET_S = 30 * 60.0  # DESIGN §7: one experiment=paper JOCC iteration on 2 cores
 STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned", "rra")
 EVALUATE_DONE = re.compile(r"stage evaluate done in ([0-9.]+) s")
+#: a ``jocc.log`` line: its time stamp, then the run's start or a stage's end
+LOG_TIME = re.compile(r"^\[(\d{4}-\d\d-\d\d \d\d:\d\d:\d\d),(\d{3})\]")
+STAGE_DONE = re.compile(r"JOCC iteration (\d+), stage (\S+) done in ([0-9.]+) s")
+RUN_START = re.compile(r" - jocc seed=")
+PEAK_RSS = re.compile(r"Maximum resident set size \(kbytes\): (\d+)")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -41,6 +59,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--rra-iterations", type=int, default=300, help="RRA budget")
     p.add_argument("--load", default="", help="load averages seen during the runs (recorded)")
     p.add_argument("--cpu-share", action="append", default=[], help="LABEL=CPU_S/WALL_S")
+    p.add_argument(
+        "--time-v",
+        action="append",
+        default=[],
+        help="LABEL=FILE: the run's `/usr/bin/time -v -o FILE` report (peak RSS, CPU share)",
+    )
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
     shares = {}
@@ -55,6 +79,14 @@ def parse_args(argv=None) -> argparse.Namespace:
             p.error(f"--cpu-share {item!r} must look like LABEL=CPU_S/WALL_S with 0 < CPU <= WALL")
         shares[label] = share
     args.cpu_share = shares
+    reports = {}
+    for item in args.time_v:
+        label, _, path = item.partition("=")
+        report = Path(path).read_text() if path and Path(path).is_file() else ""
+        if not label or not PEAK_RSS.search(report):
+            p.error(f"--time-v {item!r} must be LABEL=FILE of a `/usr/bin/time -v` report")
+        reports[label] = time_report(report)
+    args.time_v = reports
     runs = []
     for item in args.runs:
         label, _, path = item.partition("=")
@@ -82,8 +114,11 @@ def read_run(path: Path) -> dict:
 
     seconds: dict[str, list[float]] = {}
     frames: dict[str, int] = {}
+    counts: dict[int, dict[str, int]] = {}
     with open(path / "metrics.csv", newline="") as handle:
         for row in csv.DictReader(handle):
+            per_stage = counts.setdefault(int(row["jocc_iteration"]), {})
+            per_stage[row["stage"]] = per_stage.get(row["stage"], 0) + 1
             stage = stage_of(row)
             if stage is not None:
                 seconds.setdefault(stage, []).append(float(row["seconds"]))
@@ -111,7 +146,70 @@ def read_run(path: Path) -> dict:
         "eval_episodes": cfg.get("experiment", {}).get("eval_episodes"),
         "stages": stages,
         "evaluate_s": [float(s) for s in EVALUATE_DONE.findall(log)],
+        "measured": measured_iterations(log, counts),
     }
+
+
+def time_report(text: str) -> dict:
+    """Peak RSS (MB), CPU and wall seconds of a ``/usr/bin/time -v`` report."""
+
+    def field(name: str) -> str:
+        match = re.search(rf"{re.escape(name)}: (.+)", text)
+        return match.group(1).strip() if match else ""
+
+    wall = 0.0
+    for part in field("Elapsed (wall clock) time (h:mm:ss or m:ss)").split(":"):
+        wall = 60.0 * wall + float(part or 0.0)
+    cpu = float(field("User time (seconds)") or 0.0) + float(field("System time (seconds)") or 0.0)
+    return {
+        "peak_rss_mb": int(PEAK_RSS.search(text).group(1)) / 1024.0,
+        "cpu_s": cpu,
+        "wall_s": wall,
+        "cpu_share": cpu / wall if wall > 0 else None,
+    }
+
+
+def measured_iterations(log: str, budgets: dict) -> list[dict]:
+    """Per JOCC iteration of a run's ``jocc.log``: each stage's wall seconds (its ``done in``
+    line), and the iteration's wall seconds from the end of the one before (the run's start
+    for the first) to its last stage's end: warm start, value fit and checkpoints included.
+    ``budgets`` (``"stage": PPO iterations``, from ``metrics.csv``) marks the stages a run
+    cut short."""
+
+    def stamp(line: str):
+        match = LOG_TIME.match(line)
+        if match is None:
+            return None
+        moment = datetime.strptime(match.group(1), "%Y-%m-%d %H:%M:%S")
+        return moment.timestamp() + int(match.group(2)) / 1000.0
+
+    out: dict[int, dict] = {}
+    last_end = None
+    for line in log.splitlines():
+        if RUN_START.search(line) and last_end is None:
+            last_end = stamp(line)
+            continue
+        match = STAGE_DONE.search(line)
+        if match is None:
+            continue
+        iteration, stage, seconds = int(match.group(1)), match.group(2), float(match.group(3))
+        entry = out.setdefault(iteration, {"jocc_iteration": iteration, "stages": {}})
+        entry["stages"][stage] = seconds
+        moment = stamp(line)
+        if moment is not None:
+            entry.setdefault("began", last_end)
+            entry["ended"] = moment
+            last_end = moment
+    rows = []
+    for iteration in sorted(out):
+        entry = out[iteration]
+        began, ended = entry.pop("began", None), entry.pop("ended", None)
+        entry["wall_s"] = None if began is None or ended is None else ended - began
+        done = budgets.get(iteration, {})
+        entry["ppo_iterations"] = done
+        entry["complete"] = "evaluate" in entry["stages"]
+        rows.append(entry)
+    return rows
 
 
 def paper_iteration(run: dict, control_iterations: int, rra_iterations: int) -> dict:
@@ -174,6 +272,22 @@ def main(argv=None) -> int:
                 f"{'–' if later is None else f'{later / 60:.0f} min'} "
                 f"(evaluation {est[f'evaluate{suffix}_s']:.0f} s)"
             )
+    for label, run in runs.items():
+        for entry in run["measured"]:
+            stages = ", ".join(f"{k} {v / 60:.1f}" for k, v in entry["stages"].items())
+            wall = entry["wall_s"]
+            print(
+                f"{label}: JOCC iteration {entry['jocc_iteration']} measured: "
+                f"{'–' if wall is None else f'{wall / 60:.1f} min'} "
+                f"({'complete' if entry['complete'] else 'cut short'}; stages in min: {stages}; "
+                f"target {TARGET_S / 60:.0f} min)"
+            )
+        report = args.time_v.get(label)
+        if report is not None:
+            print(
+                f"{label}: peak RSS {report['peak_rss_mb']:,.0f} MB, CPU {report['cpu_s']:,.0f} s "
+                f"over {report['wall_s']:,.0f} s wall"
+            )
     atomic_write_json(
         args.out,
         {
@@ -186,6 +300,8 @@ def main(argv=None) -> int:
             },
             "runs": runs,
             "ratios_to_reference": ratios,
+            "time_v": args.time_v,
+            "target_s": TARGET_S,
             "paper_iteration_at_these_timings": estimates,
         },
     )

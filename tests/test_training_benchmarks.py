@@ -313,3 +313,40 @@ def test_the_reference_sizes_are_the_paper_configs_and_fit_the_sweep():
     algo = budgets["paper_algo"]
     assert algo["num_envs"] * algo["rollout_steps"] == stages.CONTROL_FRAMES
     assert algo["rra_num_envs"] * algo["rra_rollout_steps"] == stages.RRA_FRAMES
+
+
+def test_paper_stage_timings_measures_whole_jocc_iterations(tmp_path, capsys):
+    run = tmp_path / "run"
+    _fake_run(run, {(0, "control_perfect"): [1.0, 1.0], (1, "control_perfect"): [1.0]}, [])
+    lines = [
+        ("10:00:00,000", "jocc seed=0 in run: ..."),
+        ("10:03:00,000", "JOCC iteration 0, stage control_perfect done in 60.0 s"),
+        ("10:10:00,500", "JOCC iteration 0, stage evaluate done in 30.0 s"),
+        ("10:12:00,500", "JOCC iteration 1, stage control_perfect done in 90.0 s"),
+    ]
+    (run / "jocc.log").write_text(
+        "".join(f"[2026-12-05 {at}][vdtn_marl][INFO] - {text}\n" for at, text in lines)
+    )
+    measured = timings.read_run(run)["measured"]
+    assert [m["jocc_iteration"] for m in measured] == [0, 1]
+    first, second = measured
+    assert first["wall_s"] == pytest.approx(600.5)  # warm start and checkpoints included
+    assert first["stages"] == {"control_perfect": 60.0, "evaluate": 30.0} and first["complete"]
+    assert second["wall_s"] == pytest.approx(120.0) and not second["complete"]
+    assert first["ppo_iterations"] == {"control_perfect": 2}
+    report = tmp_path / "time.txt"
+    report.write_text(
+        "\tUser time (seconds): 100.5\n\tSystem time (seconds): 9.5\n"
+        "\tElapsed (wall clock) time (h:mm:ss or m:ss): 1:01:40\n"
+        "\tMaximum resident set size (kbytes): 2048000\n"
+    )
+    out = tmp_path / "out.json"
+    assert timings.main([f"run={run}", "--time-v", f"run={report}", "--out", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert data["time_v"]["run"]["peak_rss_mb"] == pytest.approx(2000.0)
+    assert data["time_v"]["run"]["wall_s"] == pytest.approx(3700.0)
+    assert data["time_v"]["run"]["cpu_s"] == pytest.approx(110.0)
+    assert "JOCC iteration 0 measured: 10.0 min (complete" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        timings.parse_args([f"run={run}", "--time-v", f"run={tmp_path / 'none.txt'}"])
+    assert "--time-v" in capsys.readouterr().err
