@@ -546,3 +546,46 @@ def test_every_registered_algorithm_trains_through_the_trainer_protocol(name):
     validate(replace(RunConfig(), algo=replace(RunConfig().algo, name=name)))
     with pytest.raises(ConfigError, match="algo.name='nope'"):
         trainer_class("nope")
+
+
+def _all_params(loop: JointOptimisation) -> list[torch.Tensor]:
+    return [
+        p.detach().clone()
+        for trainer in loop.trainers().values()
+        for module in (trainer.actor, trainer.critic)
+        for p in module.parameters()
+    ]
+
+
+# calls of train_iteration in a 2-iteration JOCC run of TINY_EXPERIMENT: per JOCC iteration
+# 4 π*, 4 π̃ and 2 RRA; each crash comes after a checkpoint of its stage (every 2 iterations)
+@pytest.mark.parametrize(
+    "crash_at", [7, 10, 13, 17, 20], ids=["pi_tilde0", "rra0", "pi_star1", "pi_tilde1", "rra1"]
+)
+def test_jocc_resumes_bit_for_bit_in_each_stage_of_two_iterations(tmp_path, monkeypatch, crash_at):
+    cfg = tiny_config(experiment=replace(TINY_EXPERIMENT, jocc_iterations=2))
+    straight = JointOptimisation(cfg, tmp_path / "straight")
+    straight.run()
+    reference = _all_params(straight)
+
+    interrupted = JointOptimisation(cfg, tmp_path / "resumed")
+    original = PPOTrainer.train_iteration
+    calls = {"n": 0}
+
+    def crash(self):
+        calls["n"] += 1
+        if calls["n"] == crash_at:
+            raise KeyboardInterrupt
+        return original(self)
+
+    monkeypatch.setattr(PPOTrainer, "train_iteration", crash)
+    with pytest.raises(KeyboardInterrupt):
+        interrupted.run()
+    monkeypatch.setattr(PPOTrainer, "train_iteration", original)
+
+    resumed = JointOptimisation(replace(cfg, resume=True), tmp_path / "resumed")
+    assert resumed.run()["resumed"] is True
+    for a, b in zip(reference, _all_params(resumed), strict=True):
+        assert torch.equal(a, b)
+    strip = [r.rsplit(",", 1)[0] for r in (tmp_path / "straight" / "metrics.csv").open()]
+    assert strip == [r.rsplit(",", 1)[0] for r in (tmp_path / "resumed" / "metrics.csv").open()]

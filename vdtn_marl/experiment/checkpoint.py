@@ -60,6 +60,10 @@ class CheckpointedLoop(Protocol):
 
     def trainers(self) -> dict[str, Trainer]: ...
 
+    def prepare_resume(self, position: dict[str, Any]) -> None:
+        """Make the loop's objects those of a run at ``position`` (before the trainers'
+        states, which include their environments', are loaded into them)."""
+
 
 def checkpoint_path(run_dir: str | Path) -> Path:
     """``run_dir/checkpoints/last.pt``."""
@@ -113,6 +117,7 @@ def resume(loop: CheckpointedLoop) -> bool:
         raise CheckpointError(
             f"checkpoint {str(path)!r} is from task={saved.get('task')!r}, not task={loop.task!r}"
         )
+    loop.prepare_resume(saved["position"])
     load_policies(loop, saved)
     loop.position = dict(saved["position"])
     set_rng_state(saved["rng"])

@@ -339,6 +339,29 @@ class JointOptimisation:
         """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
         return checkpoint.resume(self)
 
+    def prepare_resume(self, position: dict[str, Any]) -> None:
+        """Put in π̃'s RRA slot the policy it held at ``position`` (a checkpoint's), so that the
+        checkpoint's state of π̃'s environment, which holds that policy's state, loads into a
+        policy of its kind. π̃'s stage of each JOCC iteration sets the slot when it begins
+        (:meth:`_train_stage`): at ``position`` it holds that of its iteration once that
+        stage has begun, else that of the iteration before, else the untrained policy the
+        loop was built with."""
+        if "control_impaired" not in self.stages:
+            return
+        index = self.stages.index("control_impaired")
+        begun = position["stage"] > index or (
+            position["stage"] == index and position["stage_start"] is not None
+        )
+        iteration = position["iteration"] - (0 if begun else 1)
+        if iteration < 0:
+            return
+        # the RRA agents had trained `iteration` stages when the slot was set
+        trained = "rra" in self.stages and iteration * self.cfg.experiment.rra_iterations > 0
+        if self.rra_learned and trained:  # the RRA trainer's weights load after this
+            self.rra_slot.policy = ActorPolicy(self.rra.actor, "rra")
+        else:
+            self.rra_slot.policy = self.rra_policy(untrained=True)
+
     # ------------------------------------------------------------------ stages
     def _stage_budget(self, stage: str) -> tuple[Trainer | None, int]:
         e = self.cfg.experiment
@@ -360,9 +383,9 @@ class JointOptimisation:
         trainer, budget = self._stage_budget(stage)
         if trainer is None or budget == 0:
             return
-        if stage == "control_impaired":
-            self.rra_slot.policy = self.rra_policy()
         if self.position["stage_start"] is None:
+            if stage == "control_impaired":  # π̃ trains under the RRA policy of this iteration
+                self.rra_slot.policy = self.rra_policy()
             if stage == "control_perfect" and trainer.iteration == 0:
                 self._warm_start_pi_star()
             if stage == "rra" and self.v_fit is not None:
