@@ -567,6 +567,10 @@ def test_jocc_resumes_bit_for_bit_in_each_stage_of_two_iterations(tmp_path, monk
     straight = JointOptimisation(cfg, tmp_path / "straight")
     straight.run()
     reference = _all_params(straight)
+    # the finished run's checkpoint loads too (eval, the scripts that read checkpoints)
+    loaded = JointOptimisation.from_checkpoint(straight.checkpoint_path, tmp_path / "loaded")
+    for a, b in zip(reference, _all_params(loaded), strict=True):
+        assert torch.equal(a, b)
 
     interrupted = JointOptimisation(cfg, tmp_path / "resumed")
     original = PPOTrainer.train_iteration

@@ -60,7 +60,7 @@ class CheckpointedLoop(Protocol):
 
     def trainers(self) -> dict[str, Trainer]: ...
 
-    def prepare_resume(self, position: dict[str, Any]) -> None:
+    def prepare_load(self, position: dict[str, Any]) -> None:
         """Make the loop's objects those of a run at ``position`` (before the trainers'
         states, which include their environments', are loaded into them)."""
 
@@ -92,6 +92,8 @@ def save(loop: CheckpointedLoop, path: Path | None = None) -> Path:
 def load_policies(loop: CheckpointedLoop, saved: dict[str, Any]) -> None:
     """Load every trainer state a checkpoint holds (policies, critics, optimisers) into
     ``loop``'s trainers, and its fitted v* where both have one."""
+    if "position" in saved:
+        loop.prepare_load(saved["position"])
     for name, trainer in loop.trainers().items():
         state = saved["trainers"].get(name)
         if state is not None:
@@ -117,7 +119,6 @@ def resume(loop: CheckpointedLoop) -> bool:
         raise CheckpointError(
             f"checkpoint {str(path)!r} is from task={saved.get('task')!r}, not task={loop.task!r}"
         )
-    loop.prepare_resume(saved["position"])
     load_policies(loop, saved)
     loop.position = dict(saved["position"])
     set_rng_state(saved["rng"])

@@ -339,7 +339,7 @@ class JointOptimisation:
         """Continue from ``checkpoints/last.pt`` if it exists; returns whether it did."""
         return checkpoint.resume(self)
 
-    def prepare_resume(self, position: dict[str, Any]) -> None:
+    def prepare_load(self, position: dict[str, Any]) -> None:
         """Put in π̃'s RRA slot the policy it held at ``position`` (a checkpoint's), so that the
         checkpoint's state of π̃'s environment, which holds that policy's state, loads into a
         policy of its kind. π̃'s stage of each JOCC iteration sets the slot when it begins
