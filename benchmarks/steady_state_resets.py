@@ -9,22 +9,27 @@ start at interval 0, so their episodes end together (every 400 intervals, once p
 iterations of ``experiment=paper``) and only a collision resets a few of them in between. A
 run's scenarios persist across PPO iterations (``algo.persistent_envs``): every collision
 starts that scenario's episode anew at another offset, so after some hundreds of iterations
-episodes end at most intervals, and each interval at which some end starts their first
-interval and runs its radio for them a second time (``IntervalEngine.run_radio``).
+episodes end at many intervals. At such an interval the TorchRL environment starts the
+ended scenarios' episodes together with the others' next interval, one interval start and one
+radio run for the whole batch (``IntervalEngine.restart_ended``); the ``separate`` arm times
+what that replaces: the others' next interval (``advance``), then the ended scenarios' reset
+with its own interval start and radio run (``reset``).
 
 From a ``jocc`` checkpoint (its config, weights and π̃'s persisting scenarios; the RRA policy
-π̃ trains under at that point: the learned one once the RRA agents have trained), two arms
+π̃ trains under at that point: the learned one once the RRA agents have trained), three arms
 of π̃'s collection, interleaved ``--repeats`` times, each ``--iterations`` PPO iterations of
-collection (no update, so both arms act with the checkpoint's weights):
+collection (no update, so every arm acts with the checkpoint's weights):
 
 - ``run``: the checkpoint's scenarios, as the run continues them (restored before each repeat);
+- ``separate``: the same, each ending restarted by ``advance`` and ``reset`` (two radio runs);
 - ``fresh``: the same weights from scenarios reset with the trainer's seed of the checkpoint's
   iteration, timed after one collection (its warm-up), as ``stage_throughput.py`` times them.
 
 Per arm: collection seconds (median over its iterations), radio runs per interval, and per
 iteration the intervals at which some scenarios were reset and how many scenarios were. The
-ratio run / fresh of the medians says how much a benchmark from fresh scenarios underestimates
-a run's π̃ iteration (the PPO update, the same in both, is not part of it).
+ratios of the medians say what the one-start restart saves (run / separate) and how much a
+benchmark from fresh scenarios underestimates a run's π̃ iteration (run / fresh; the PPO
+update, the same in all arms, is not part of it).
 """
 
 from __future__ import annotations
@@ -37,7 +42,7 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results" / "steady_state_resets.json"
-ARMS = ("run", "fresh")
+ARMS = ("run", "separate", "fresh")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -56,9 +61,13 @@ def parse_args(argv=None) -> argparse.Namespace:
 
 class Counts:
     """Counts, inside ``with``, the radio runs and the resets: the intervals at which scenarios
-    restart (``IntervalEngine.reset``), how many do, and at how many all of them do. A reset
-    of some scenarios runs their first interval's radio besides the others' next interval; a
-    reset of all replaces the next interval's run (``IntervalEngine.advance``)."""
+    restart (``IntervalEngine.reset`` or ``restart_ended``), how many do, and at how many all
+    of them do. ``separate``: ``restart_ended`` does what it replaces, ``advance`` of the
+    others, then ``reset`` of the ended scenarios, which runs their first interval's radio
+    besides the others' next interval's."""
+
+    def __init__(self, separate: bool = False):
+        self.separate = separate
 
     def __enter__(self):
         from vdtn_marl.core.interval import IntervalEngine
@@ -67,8 +76,20 @@ class Counts:
         self._saved = (
             (IntervalEngine, "run_radio", IntervalEngine.run_radio),
             (IntervalEngine, "reset", IntervalEngine.reset),
+            (IntervalEngine, "restart_ended", IntervalEngine.restart_ended),
         )
-        radio, reset = self._saved[0][2], self._saved[1][2]
+        radio, reset, restart = (saved[2] for saved in self._saved)
+        separate = self.separate
+
+        def counted_restart(engine, going):
+            ended = ~going
+            if separate:
+                engine.advance(going)
+                return engine.reset(ended)  # counted there
+            if bool(ended.any()) and not bool(ended.all()):
+                self.resets += 1
+                self.reset_rows += int(ended.sum())
+            return restart(engine, going)
 
         def counted_radio(engine, *args, **kwargs):
             self.radio_runs += 1
@@ -83,6 +104,7 @@ class Counts:
 
         IntervalEngine.run_radio = counted_radio
         IntervalEngine.reset = counted_reset
+        IntervalEngine.restart_ended = counted_restart
         return self
 
     def __exit__(self, *exc):
@@ -108,10 +130,10 @@ def load_loop(checkpoint: Path, run_dir: Path):
     return loop
 
 
-def collect(trainer, iterations: int) -> list[dict]:
+def collect(trainer, iterations: int, separate: bool = False) -> list[dict]:
     rows = []
     for _ in range(iterations):
-        with Counts() as counts:
+        with Counts(separate) as counts:
             began, began_cpu = time.perf_counter(), time.process_time()
             data = trainer.collect()
             seconds, cpu = time.perf_counter() - began, time.process_time() - began_cpu
@@ -165,14 +187,15 @@ def main(argv=None) -> int:
                 trainer.iteration = start_iteration
                 torch.set_rng_state(rng)
                 trainer.env.load_state_dict(env_state)
-                trainer._carry = carry.clone() if arm == "run" else None
+                trainer._carry = None if arm == "fresh" else carry.clone()
                 if arm == "fresh":  # reset, then one collection untimed, as stage_throughput.py
                     collect(trainer, 1)
-                runs[arm] += collect(trainer, args.iterations)
+                runs[arm] += collect(trainer, args.iterations, separate=arm == "separate")
         policy = type(loop.rra_slot.policy).__name__
         batch = tuple(trainer.env.batch_size)
     arms = {arm: summarise(rows) for arm, rows in runs.items()}
     ratio = arms["run"]["collect_s"] / arms["fresh"]["collect_s"]
+    saved = arms["run"]["collect_s"] / arms["separate"]["collect_s"]
     result = {
         **provenance("steady_state_resets"),
         "load_average_start": list(load_start),
@@ -183,18 +206,20 @@ def main(argv=None) -> int:
         "batch": list(batch),
         "arms": arms,
         "run_over_fresh_collect_s": ratio,
+        "run_over_separate_collect_s": saved,
         "runs": runs,
     }
     print(f"\nπ̃ at PPO iteration {start_iteration}, B = {batch[0]}, RRA policy {policy}")
     print(
-        f"{'arm':<6} {'collect s':>9} {'radio/int':>9} {'reset int/it':>12} {'reset scen/it':>13}"
+        f"{'arm':<8} {'collect s':>9} {'radio/int':>9} {'reset int/it':>12} {'reset scen/it':>13}"
     )
     for arm, s in arms.items():
         print(
-            f"{arm:<6} {s['collect_s']:>9.2f} {s['radio_runs_per_interval']:>9.2f} "
+            f"{arm:<8} {s['collect_s']:>9.2f} {s['radio_runs_per_interval']:>9.2f} "
             f"{s['reset_intervals_per_iteration']:>12.1f} "
             f"{s['reset_scenarios_per_iteration']:>13.1f}"
         )
+    print(f"run / separate collection seconds: {saved:.2f} (one restart start against two)")
     print(f"run / fresh collection seconds: {ratio:.2f}")
     atomic_write_json(args.out, result)
     print(f"wrote {args.out}")

@@ -65,22 +65,22 @@ def test_both_arms_collect_from_the_checkpoints_weights(checkpoint, tmp_path):
     data = json.loads(out.read_text())
     assert data["rra_policy"] == "ActorPolicy"  # the RRA agents trained: π̃ runs under them
     assert data["pi_tilde_iteration"] == 4 and data["batch"] == [4]
-    for arm in ("run", "fresh"):
+    for arm in ("run", "separate", "fresh"):
         rows = data["runs"][arm]
         assert len(rows) == 4 and all(r["intervals"] == 10 for r in rows)
-        # one radio run per interval, one more per interval at which some (not all) restart
-        assert all(
-            r["radio_runs"] == r["intervals"] + r["reset_intervals"] - r["whole_batch_resets"]
-            for r in rows
-        )
+        if arm == "separate":  # one radio run more per interval at which some (not all) end
+            extra = [r["reset_intervals"] - r["whole_batch_resets"] for r in rows]
+        else:  # the ended scenarios start with the others' next interval: one run
+            extra = [0] * len(rows)
+        assert [r["radio_runs"] - r["intervals"] for r in rows] == extra
         assert all(r["reset_intervals"] <= r["reset_scenarios"] for r in rows)
         # each repeat starts from the same state: its collections are the same collections
         counts = [(r["radio_runs"], r["reset_scenarios"]) for r in rows]
         assert counts[:2] == counts[2:]
-    # episodes of 15 intervals, 10 per collection: some scenarios restart in both arms
-    for arm in ("run", "fresh"):
+    # episodes of 15 intervals, 10 per collection: some scenarios restart in every arm
+    for arm in ("run", "separate", "fresh"):
         assert sum(r["reset_scenarios"] for r in data["runs"][arm]) > 0
-    assert data["run_over_fresh_collect_s"] > 0
+    assert data["run_over_fresh_collect_s"] > 0 and data["run_over_separate_collect_s"] > 0
 
 
 def test_refuses_a_missing_checkpoint_and_bad_counts(tmp_path, checkpoint, capsys):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ast
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -241,3 +242,60 @@ def test_the_numpy_twin_takes_the_policy_actions_as_they_are():
 def test_every_face_refuses_a_part_that_is_not_callable_naming_it(make, key):
     with pytest.raises(TypeError, match=key):
         make()
+
+
+def _rows_equal(twin_a, twin_b, rows):
+    """The scenarios ``rows`` [B] (bool) of two twins: the same interval, platoon, link state,
+    V2I totals and RRA observations, bit for bit."""
+    assert torch.equal(twin_a.interval[rows], twin_b.interval[rows])
+    for field in dataclasses.fields(twin_a._platoon):
+        a, b = getattr(twin_a._platoon, field.name), getattr(twin_b._platoon, field.name)
+        assert torch.equal(a[rows], b[rows]), field.name
+    for field in dataclasses.fields(twin_a.link_state):
+        a, b = getattr(twin_a.link_state, field.name), getattr(twin_b.link_state, field.name)
+        assert torch.equal(a[rows], b[rows]), field.name
+    assert torch.equal(twin_a._v2i_rate_sum[rows], twin_b._v2i_rate_sum[rows])
+    assert torch.equal(twin_a._rra_obs[:, rows], twin_b._rra_obs[:, rows])
+
+
+@pytest.mark.parametrize("rowwise", [False, True], ids=["whole-batch policy", "rowwise"])
+@pytest.mark.parametrize("ended", [[1, 4], [0, 1, 3, 4]], ids=["few", "most"])
+def test_restart_ended_is_an_advance_and_a_reset_in_one_radio_run(ended, rowwise):
+    """``restart_ended(going)``: the ended scenarios are where ``reset(ended)`` puts them and
+    the others where ``advance(going)`` does, from the same draws (the reset's first, then the
+    interval's fading), with the policy asked once per subframe for the whole batch."""
+    batch = 6
+    going = torch.ones(batch, dtype=torch.bool)
+    going[ended] = False
+    engine = _engine(batch=batch, seed=7)
+    num_actions = engine.twin.params.radio.num_actions
+    engine.rra_policy = policy = _RowPolicy(num_actions, rowwise)
+    engine.run_radio()
+    engine.close()
+    engine.advance()
+    engine.close()
+    as_reset, as_advance = copy.deepcopy(engine), copy.deepcopy(engine)
+    policy.batches.clear()
+    engine.restart_ended(going)
+    assert policy.batches == [batch] * engine.twin.subframes_per_interval
+    assert engine.twin.subframe == engine.twin.subframes_per_interval
+    assert engine.twin.interval[~going].eq(0).all() and engine.twin.interval[going].eq(2).all()
+    as_reset.reset(~going)  # the reset's draws, then the whole batch's fading (any mask)
+    _rows_equal(engine.twin, as_reset.twin, ~going)
+    as_advance.twin.reset(mask=~going, begin=False)  # the same draws before the interval's
+    as_advance.advance(going)
+    _rows_equal(engine.twin, as_advance.twin, going)
+
+
+def test_restart_ended_with_all_or_none_going_is_advance_or_reset():
+    for going in (torch.ones(4, dtype=torch.bool), torch.zeros(4, dtype=torch.bool)):
+        engine = _engine(seed=8)
+        engine.run_radio()
+        engine.close()
+        other = copy.deepcopy(engine)
+        engine.restart_ended(going)
+        if bool(going.all()):
+            other.advance()
+        else:
+            other.reset()
+        _rows_equal(engine.twin, other.twin, torch.ones(4, dtype=torch.bool))

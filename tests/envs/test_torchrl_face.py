@@ -276,6 +276,74 @@ def test_partial_reset_control_impaired_keeps_other_scenarios():
     assert torch.isfinite(env.step(td)["next", "vehicle", "reward"]).all()
 
 
+def _counting_radio(env):
+    """Count the engine's radio runs (an instance attribute shadows the method)."""
+    runs = []
+    radio = env.engine.run_radio
+
+    def counted(*args, **kwargs):
+        runs.append(1)
+        return radio(*args, **kwargs)
+
+    env.engine.run_radio = counted
+    return runs
+
+
+def test_scenarios_ending_apart_restart_in_the_step_with_one_radio_run():
+    """Scenarios whose episodes end at different intervals (persisting scenarios): the step
+    that ends some starts their new episodes together with the others' next interval, one radio
+    run per interval, and TorchRL's reset that follows hands out their first observation."""
+    env = VDTNTorchRLEnv(mode="control_impaired", batch_size=4, seed=4, episode_intervals=6)
+    td = env.reset()
+    for _ in range(2):
+        td["vehicle", "action"] = torch.zeros(4, 3, 1)
+        td = env.step(td)["next"]
+    td = _reset_first(env, td)  # scenario 0 now ends 2 intervals after the others
+    runs = _counting_radio(env)
+    ended = []
+    for _ in range(6):
+        td["vehicle", "action"] = torch.zeros(4, 3, 1)
+        step, td = env.step_and_maybe_reset(td)
+        done = step["next", "done"].squeeze(-1)
+        ended.append(done.clone())
+        if bool(done.any()):
+            assert not bool(done.all())
+            assert env.twin.interval[done].eq(0).all()  # started anew, by the step
+            # the carried observation of a restarted scenario is its new episode's first
+            torch.testing.assert_close(
+                td["vehicle", "observation"][done], env.engine.observe()[done], rtol=0, atol=0
+            )
+            assert not torch.equal(
+                td["vehicle", "observation"][done], step["next", "vehicle", "observation"][done]
+            )
+    assert len(runs) == 6  # one radio run per interval, endings included
+    assert ended[3].tolist() == [False, True, True, True]  # the others' 6th interval
+    assert ended[5].tolist() == [True, False, False, False]
+
+
+def test_a_reset_of_more_scenarios_than_the_step_ended_resets_the_others_only():
+    """A collector may reset scenarios the step did not end (its own truncation): those start
+    anew there; the ones the step already started are not started twice."""
+    env = VDTNTorchRLEnv(mode="control_impaired", batch_size=4, seed=5, episode_intervals=4)
+    td = env.reset()
+    td["vehicle", "action"] = torch.zeros(4, 3, 1)
+    td = env.step(td)["next"]
+    td = _reset_first(env, td)
+    for _ in range(3):  # scenarios 1-3 end at the third step, scenario 0 goes on
+        td["vehicle", "action"] = torch.zeros(4, 3, 1)
+        td = env.step(td)["next"]
+    restarted = env.twin.interval.eq(0)
+    assert restarted.tolist() == [False, True, True, True]
+    state = {f: getattr(env.twin._platoon, f).clone() for f in ("position_m", "speed_mps")}
+    td = td.clone()
+    td["_reset"] = torch.tensor([[True], [True], [False], [False]])  # 1 ended, 0 cut short
+    env.reset(td)
+    assert env.twin.interval.eq(0).all()  # scenario 0 started anew here
+    for name, before in state.items():  # scenario 1 kept the episode the step started
+        assert torch.equal(getattr(env.twin._platoon, name)[1], before[1]), name
+    assert not torch.equal(env.twin._platoon.position_m[0], state["position_m"][0])
+
+
 def test_partial_reset_joint_mid_interval():
     kwargs = {"mode": "joint", "batch_size": 4, "seed": 6, "episode_intervals": 5}
     env, ref = VDTNTorchRLEnv(**kwargs), VDTNTorchRLEnv(**kwargs)

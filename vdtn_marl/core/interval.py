@@ -165,6 +165,33 @@ class IntervalEngine:
         elif keep_clock and mask is not None and subframe < twin.subframes_per_interval:
             twin.subframe = subframe
 
+    def restart_ended(self, going: torch.Tensor) -> None:
+        """The next interval of the ``going`` scenarios [B] and new episodes in the others, in
+        one start: what :meth:`advance` ``(going)`` and :meth:`reset` ``(~going)`` do, with one
+        interval start and one radio run of the whole batch instead of a masked start and
+        radio run for each group. A run's scenarios persist across PPO iterations, so their
+        episodes end at different intervals (a collision, the episode's length), and at about
+        half of π̃'s intervals some end (``benchmarks/steady_state_resets.py``).
+
+        The same model, other random numbers: the new episodes draw theirs (traces, initial
+        state, shadowing) before the interval's fading, not after it, and the whole batch's
+        fading is drawn once instead of twice. With every scenario going this is
+        :meth:`advance`; with none, :meth:`reset`."""
+        twin = self.twin
+        ended = ~torch.as_tensor(going, dtype=torch.bool, device=twin.device)
+        if not bool(ended.any()):
+            self.advance()
+            return
+        if bool(ended.all()):
+            self.reset()
+            return
+        twin.reset(mask=ended, begin=False)
+        if self.completion is not None:
+            self.completion.reset(ended)
+        twin.begin_interval()
+        if self.drives_radio:
+            self.run_radio()
+
     def run_radio(self, mask: torch.Tensor | None = None, policy: Callable | None = None) -> None:
         """Run the interval's T subframes with ``policy`` (default ``rra_policy``); with
         ``mask`` [B] only the masked scenarios keep the result (the others had already run this

@@ -210,6 +210,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         self.burn_in_intervals = burn_in_intervals
         self._burn_in_exact: int | None = None  # set by burned_in()
         self._vehicle_obs: torch.Tensor | None = None
+        # the scenarios whose new episodes the last step already started (_step_interval)
+        self._restarted: torch.Tensor | None = None
         self._make_specs()
 
     # ------------------------------------------------------------------ groups
@@ -463,13 +465,17 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
     def _reset(self, tensordict: TensorDictBase | None = None, **kwargs) -> TensorDictBase:
         twin, engine = self.twin, self.engine
         mask = self._reset_mask(tensordict)
+        restarted, self._restarted = self._restarted, None
         full = mask is None or bool(mask.all())
         if full:
             engine.reset()  # with the first interval's radio in "control_impaired"
             if self.burn_in_intervals or self._burn_in_exact is not None:
                 self._burn_in()
-        elif bool(mask.any()):
-            engine.reset(mask, keep_clock=self.has_rra)
+        else:
+            if restarted is not None:  # started by the step that ended them
+                mask = mask & ~restarted
+            if bool(mask.any()):
+                engine.reset(mask, keep_clock=self.has_rra)
 
         vehicle_obs = rra_obs = None
         if self.has_vehicles:
@@ -489,6 +495,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
 
     # ------------------------------------------------------------------ step
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
+        self._restarted = None
         if self.has_rra:
             return self._step_subframe(tensordict)
         return self._step_interval(tensordict)
@@ -502,7 +509,13 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         if self.impaired and not all_going:
             # what finished scenarios know at the next decision time, before its CAM arrives
             final_obs = engine.observe(~going, cams_lost=True)
-        engine.advance(going)  # with the radio of the next interval in "control_impaired"
+        if all_going or not bool(going.any()):
+            engine.advance(going)  # with the radio of the next interval in "control_impaired"
+        else:
+            # the ended scenarios' new episodes start with the others' next interval, one
+            # radio run for all; the reset that follows (TorchRL's) finds them started
+            engine.restart_ended(going)
+            self._restarted = ~going
         obs = engine.observe()
         if final_obs is not None:
             obs = torch.where(going[:, None, None], obs, final_obs)

@@ -317,12 +317,18 @@ class DigitalTwin:
         """Context of the twin's own torch calls: one intra-op thread on the NumPy backend."""
         return self.ns.own_threads()
 
-    def reset(self, seed: int | None = None, mask: torch.Tensor | None = None) -> None:
-        """Start new episodes in all scenarios, or only where ``mask`` [B] is True."""
-        with self._torch_calls():
-            self._reset(seed, mask)
+    def reset(
+        self, seed: int | None = None, mask: torch.Tensor | None = None, begin: bool = True
+    ) -> None:
+        """Start new episodes in all scenarios, or only where ``mask`` [B] is True.
 
-    def _reset(self, seed: int | None, mask: torch.Tensor | None) -> None:
+        ``begin=False``: their first interval is not started; the caller starts it next with
+        :meth:`begin_interval` of the whole batch (one interval start for the scenarios that
+        go on and those that start anew: ``IntervalEngine.restart_ended`` of the core)."""
+        with self._torch_calls():
+            self._reset(seed, mask, begin)
+
+    def _reset(self, seed: int | None, mask: torch.Tensor | None, begin: bool = True) -> None:
         if seed is not None:
             self.seed(seed)
         b, pp, rp = self.batch_size, self.params.platoon, self.params.radio
@@ -366,7 +372,8 @@ class DigitalTwin:
             self._cam_held_interval = ns.full((b, self.num_followers), -1, "int64")
             self._cam_delay_history = ns.zeros((b, self.num_links, RRA_DELAY_HISTORY))
             self._command_history = ns.zeros((b, self.num_followers, RRA_COMMAND_HISTORY))
-            self.begin_interval()
+            if begin:
+                self.begin_interval()
             return
         rows = ns.mask(mask)
         self._leader_speed_mps[rows] = traces
@@ -386,7 +393,8 @@ class DigitalTwin:
         self._cam_held_interval[rows] = -1
         self._cam_delay_history[rows] = 0.0
         self._command_history[rows] = 0.0
-        self.begin_interval(mask)
+        if begin:
+            self.begin_interval(mask)
 
     def _scatter(self, base, rows, values):
         out = self.ns.copy(base)
