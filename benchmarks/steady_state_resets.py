@@ -83,12 +83,13 @@ class Counts:
 
         def counted_restart(engine, going):
             ended = ~going
+            if not bool(ended.any()) or bool(ended.all()):  # advance, or reset (counted)
+                return restart(engine, going)
             if separate:
                 engine.advance(going)
                 return engine.reset(ended)  # counted there
-            if bool(ended.any()) and not bool(ended.all()):
-                self.resets += 1
-                self.reset_rows += int(ended.sum())
+            self.resets += 1
+            self.reset_rows += int(ended.sum())
             return restart(engine, going)
 
         def counted_radio(engine, *args, **kwargs):

@@ -120,6 +120,19 @@ class _RowPolicy:
         return (observation.sum(-1) * 1e3).long().remainder(self.num_actions)
 
 
+def _two_intervals_closed(batch: int, seed: int, rowwise: bool):
+    """An engine whose RRA policy is a :class:`_RowPolicy`, after two closed intervals, and
+    that policy with no call noted yet."""
+    engine = _engine(batch=batch, seed=seed)
+    engine.rra_policy = policy = _RowPolicy(engine.twin.params.radio.num_actions, rowwise)
+    engine.run_radio()
+    engine.close()
+    engine.advance()
+    engine.close()
+    policy.batches.clear()
+    return engine, policy
+
+
 @pytest.mark.parametrize("kind", ["reset", "advance"])
 @pytest.mark.parametrize(
     "batch, masked",
@@ -134,14 +147,7 @@ def test_a_rowwise_policy_is_asked_for_the_masked_scenarios_alone(kind, batch, m
     mask[masked] = True
     twins = {}
     for rowwise in (False, True):
-        engine = _engine(batch=batch, seed=5)
-        num_actions = engine.twin.params.radio.num_actions
-        engine.rra_policy = policy = _RowPolicy(num_actions, rowwise)
-        engine.run_radio()
-        engine.close()
-        engine.advance()
-        engine.close()
-        policy.batches.clear()
+        engine, policy = _two_intervals_closed(batch, 5, rowwise)
         if kind == "reset":
             engine.reset(mask)
         else:
@@ -267,15 +273,8 @@ def test_restart_ended_is_an_advance_and_a_reset_in_one_radio_run(ended, rowwise
     batch = 6
     going = torch.ones(batch, dtype=torch.bool)
     going[ended] = False
-    engine = _engine(batch=batch, seed=7)
-    num_actions = engine.twin.params.radio.num_actions
-    engine.rra_policy = policy = _RowPolicy(num_actions, rowwise)
-    engine.run_radio()
-    engine.close()
-    engine.advance()
-    engine.close()
+    engine, policy = _two_intervals_closed(batch, 7, rowwise)
     as_reset, as_advance = copy.deepcopy(engine), copy.deepcopy(engine)
-    policy.batches.clear()
     engine.restart_ended(going)
     assert policy.batches == [batch] * engine.twin.subframes_per_interval
     assert engine.twin.subframe == engine.twin.subframes_per_interval

@@ -509,13 +509,13 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         if self.impaired and not all_going:
             # what finished scenarios know at the next decision time, before its CAM arrives
             final_obs = engine.observe(~going, cams_lost=True)
-        if all_going or not bool(going.any()):
-            engine.advance(going)  # with the radio of the next interval in "control_impaired"
-        else:
-            # the ended scenarios' new episodes start with the others' next interval, one
-            # radio run for all; the reset that follows (TorchRL's) finds them started
+        if bool(going.any()):
+            # the next interval, with its radio in "control_impaired"; the ended scenarios'
+            # new episodes start with it, one radio run for all, and the reset that follows
+            # (TorchRL's) finds them started. With none going, that reset starts them all.
             engine.restart_ended(going)
-            self._restarted = ~going
+            if not all_going:
+                self._restarted = ~going
         obs = engine.observe()
         if final_obs is not None:
             obs = torch.where(going[:, None, None], obs, final_obs)
