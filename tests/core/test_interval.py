@@ -267,23 +267,28 @@ def _rows_equal(twin_a, twin_b, rows):
 @pytest.mark.parametrize("rowwise", [False, True], ids=["whole-batch policy", "rowwise"])
 @pytest.mark.parametrize("ended", [[1, 4], [0, 1, 3, 4]], ids=["few", "most"])
 def test_restart_ended_is_an_advance_and_a_reset_in_one_radio_run(ended, rowwise):
-    """``restart_ended(going)``: the ended scenarios are where ``reset(ended)`` puts them and
-    the others where ``advance(going)`` does, from the same draws (the reset's first, then the
-    interval's fading), with the policy asked once per subframe for the whole batch."""
+    """``restart_ended(going)``: the going scenarios are where ``advance(going)`` puts them,
+    bit for bit, and every scenario where a reset of the ended ones made after the interval's
+    draws and an interval start from those draws put it, with the policy asked once per
+    subframe for the whole batch."""
     batch = 6
     going = torch.ones(batch, dtype=torch.bool)
     going[ended] = False
     engine, policy = _two_intervals_closed(batch, 7, rowwise)
-    as_reset, as_advance = copy.deepcopy(engine), copy.deepcopy(engine)
+    in_steps, as_advance = copy.deepcopy(engine), copy.deepcopy(engine)
     engine.restart_ended(going)
     assert policy.batches == [batch] * engine.twin.subframes_per_interval
     assert engine.twin.subframe == engine.twin.subframes_per_interval
     assert engine.twin.interval[~going].eq(0).all() and engine.twin.interval[going].eq(2).all()
-    as_reset.reset(~going)  # the reset's draws, then the whole batch's fading (any mask)
-    _rows_equal(engine.twin, as_reset.twin, ~going)
-    as_advance.twin.reset(mask=~going, begin=False)  # the same draws before the interval's
-    as_advance.advance(going)
+    as_advance.advance(going)  # the interval's draws come first: the going ones' are advance's
     _rows_equal(engine.twin, as_advance.twin, going)
+    twin = in_steps.twin
+    start = twin.generator.get_state()
+    twin._interval_draws()  # the generator past the interval's draws
+    twin.reset(mask=~going, begin=False)  # the new episodes' draws after them
+    twin.generator.set_state(start)  # the interval from its own draws
+    in_steps.advance()
+    _rows_equal(engine.twin, twin, torch.ones(batch, dtype=torch.bool))
 
 
 def test_restart_ended_with_all_or_none_going_is_advance_or_reset():

@@ -38,9 +38,10 @@ def _interval(twin: DigitalTwin, actions: torch.Generator) -> list[torch.Tensor]
     return [torch.stack(observations), record.reward, record.cam_delay_subframes]
 
 
-def _episode(twin: DigitalTwin, intervals: int = 6) -> list[torch.Tensor]:
+def _episode(twin: DigitalTwin, intervals: int = 7) -> list[torch.Tensor]:
     """Intervals with a partial reset, an extra draw from the twin's generator (as an
-    environment's burn-in makes) and a full reset in between."""
+    environment's burn-in makes), a full reset and a restart (new episodes in some scenarios,
+    the next interval in the others) in between."""
     actions = torch.Generator().manual_seed(1)
     some = torch.arange(twin.batch_size) % 3 == 0
     out = []
@@ -53,6 +54,8 @@ def _episode(twin: DigitalTwin, intervals: int = 6) -> list[torch.Tensor]:
             twin.begin_interval()
         elif k == 4:
             twin.reset()
+        elif k == 5:
+            twin.restart(some)
         elif k:
             twin.begin_interval()
         out += _interval(twin, actions)
@@ -110,8 +113,9 @@ def test_draws_ahead_are_used_when_nothing_drew_and_redrawn_when_something_did(m
     _episode(twin)
     # interval 1: the draws made ahead; 2: the partial reset drew first, so the reset
     # scenarios' start draws again, and the others' start takes the draws made after it; 3:
-    # an extra draw came first; 4: the full reset drew first; 5: the draws made ahead
-    assert [draws is not None for draws in taken] == [True, False, True, False, False, True]
+    # an extra draw came first; 4: the full reset drew first; 5: the restart takes the
+    # interval's draws before its new episodes draw; 6: the draws made ahead after them
+    assert [draws is not None for draws in taken] == [True, False, True, False, False, True, True]
 
 
 def test_a_snapshot_or_a_copy_with_draws_pending_continues_as_the_twin_does():

@@ -173,9 +173,10 @@ class IntervalEngine:
         episodes end at different intervals (a collision, the episode's length), and at about
         half of π̃'s intervals some end (``benchmarks/steady_state_resets.py``).
 
-        The same model, other random numbers: the new episodes draw theirs (traces, initial
-        state, shadowing) before the interval's fading, not after it, and the whole batch's
-        fading is drawn once instead of twice. With every scenario going this is
+        The same model, other random numbers: the interval's draws come first (those made
+        ahead on the twin's second thread are kept) and the new episodes' (traces, initial
+        state, shadowing) after them (:meth:`~vdtn_marl.sim.twin.DigitalTwin.restart`), and the
+        whole batch's fading is drawn once instead of twice. With every scenario going this is
         :meth:`advance`; with none, :meth:`reset`."""
         twin = self.twin
         ended = ~torch.as_tensor(going, dtype=torch.bool, device=twin.device)
@@ -185,10 +186,9 @@ class IntervalEngine:
         if bool(ended.all()):
             self.reset()
             return
-        twin.reset(mask=ended, begin=False)
+        twin.restart(ended)
         if self.completion is not None:
             self.completion.reset(ended)
-        twin.begin_interval()
         if self.drives_radio:
             self.run_radio()
 

@@ -324,7 +324,8 @@ class DigitalTwin:
 
         ``begin=False``: their first interval is not started; the caller starts it next with
         :meth:`begin_interval` of the whole batch (one interval start for the scenarios that
-        go on and those that start anew: ``IntervalEngine.restart_ended`` of the core)."""
+        go on and those that start anew; :meth:`restart` does both, the interval's draws
+        first)."""
         with self._torch_calls():
             self._reset(seed, mask, begin)
 
@@ -413,7 +414,20 @@ class DigitalTwin:
         with self._torch_calls():
             self._begin_interval(mask)
 
-    def _begin_interval(self, mask: torch.Tensor | None) -> None:
+    def restart(self, mask: torch.Tensor) -> None:
+        """New episodes in the scenarios ``mask`` [B] selects and the next interval of the
+        others, in one interval start of the whole batch (``IntervalEngine.restart_ended`` of
+        the core). The interval's draws come first, so those made ahead on the second thread
+        are kept (NumPy backend: its shadowing innovations; the fading comes last), then the
+        new episodes' (traces, initial state, shadowing); the next interval's draws are started
+        after both. The same as :meth:`reset` ``(mask=mask, begin=False)`` with the generator
+        moved past the interval's draws first and :meth:`begin_interval` from them."""
+        with self._torch_calls():
+            draws = self._interval_draws() if self.radio_enabled else None
+            self._reset(None, mask, begin=False)
+            self._begin_interval(None, draws)
+
+    def _begin_interval(self, mask: torch.Tensor | None, draws=None) -> None:
         ns = self.ns
         keep = None if mask is None else ns.mask(mask)
         snapshot = cam_snapshot(self._platoon, self.params.platoon)
@@ -430,7 +444,7 @@ class DigitalTwin:
             return
         # all scenarios start over: the torch path overwrites the last interval's buffers
         reuse = keep is None and not ns.numpy
-        tables = self._draw_interval_tables(reuse)
+        tables = self._draw_interval_tables(reuse, draws=draws)
         link_state = link.new_link_state(
             b, self.num_links, self.num_subchannels, rp, t, ns.array_device
         )
@@ -490,8 +504,25 @@ class DigitalTwin:
         self._rra_obs.index_copy_(1, rows, self._rra_observation_buffer(tables, False, rows))
         self._v2i_rate_sum = self._v2i_rate_sum.clone().index_fill_(0, rows, 0.0)
 
+    def _interval_draws(self) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor | None]:
+        """The interval's draws in their fixed order (V2V innovation, V2I innovation, fading)
+        on both backends: made ahead on the second thread (started at the last interval's
+        start) when the generator has not drawn since, or here. The next interval's are not
+        started (:meth:`_draw_interval_tables` starts them)."""
+        workspace = self._workspace
+        ahead, workspace.ahead = workspace.ahead, None
+        draws = None if ahead is None else ahead.take(self.generator)
+        if draws is None:
+            # NumPy: build_interval_tables draws the fading itself, as NumPy arrays
+            buffers = (None, None) if self.ns.numpy else self._fading_buffers(workspace.turn)
+            n = self._platoon.position_m.shape[1]
+            draws = link.draw_interval(
+                self.generator, self.batch_size, n, buffers[0], self.fading_draws, buffers[1]
+            )
+        return draws
+
     def _draw_interval_tables(
-        self, reuse: bool, rows: torch.Tensor | None = None
+        self, reuse: bool, rows: torch.Tensor | None = None, draws=None
     ) -> link.IntervalTables:
         rp, ns = self.params.radio, self.ns
         x = self._platoon.position_m
@@ -499,17 +530,9 @@ class DigitalTwin:
         self._shadow_position_m = ns.copy(x)
         g = self.generator
         n = x.shape[1]
-        # draws in a fixed order (V2V innovation, V2I innovation, fading) on both backends:
-        # made ahead on a second thread (started below at the last interval's start), or here
         workspace = self._workspace
-        ahead, workspace.ahead = workspace.ahead, None
-        draws = None if ahead is None else ahead.take(g)
         if draws is None:
-            # NumPy: build_interval_tables draws the fading itself, as NumPy arrays
-            buffers = (None, None) if ns.numpy else self._fading_buffers(workspace.turn)
-            draws = link.draw_interval(
-                g, self.batch_size, n, buffers[0], self.fading_draws, buffers[1]
-            )
+            draws = self._interval_draws()
         v2v_innovation, v2i_innovation, drawn = draws
         if self.draw_ahead:
             # the next interval's draws from here on (nothing below draws), on a second
