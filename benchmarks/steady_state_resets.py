@@ -21,15 +21,19 @@ of π̃'s collection, interleaved ``--repeats`` times, each ``--iterations`` PPO
 collection (no update, so every arm acts with the checkpoint's weights):
 
 - ``run``: the checkpoint's scenarios, as the run continues them (restored before each repeat);
+- ``reset_first``: the same, each restart drawing the new episodes' numbers before the
+  interval's (``DigitalTwin.reset(begin=False)`` then ``begin_interval``), so that the draws
+  made ahead on the second thread are discarded and the interval's are drawn again;
 - ``separate``: the same, each ending restarted by ``advance`` and ``reset`` (two radio runs);
 - ``fresh``: the same weights from scenarios reset with the trainer's seed of the checkpoint's
   iteration, timed after one collection (its warm-up), as ``stage_throughput.py`` times them.
 
 Per arm: collection seconds (median over its iterations), radio runs per interval, and per
 iteration the intervals at which some scenarios were reset and how many scenarios were. The
-ratios of the medians say what the one-start restart saves (run / separate) and how much a
-benchmark from fresh scenarios underestimates a run's π̃ iteration (run / fresh; the PPO
-update, the same in all arms, is not part of it).
+ratios of the medians say what the one-start restart saves (run / separate), what keeping the
+draws made ahead saves (run / reset_first) and how much a benchmark from fresh scenarios
+underestimates a run's π̃ iteration (run / fresh; the PPO update, the same in all arms, is not
+part of it).
 """
 
 from __future__ import annotations
@@ -42,7 +46,7 @@ import time
 from pathlib import Path
 
 RESULTS = Path(__file__).parent / "results" / "steady_state_resets.json"
-ARMS = ("run", "separate", "fresh")
+ARMS = ("run", "reset_first", "separate", "fresh")
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -64,21 +68,25 @@ class Counts:
     restart (``IntervalEngine.reset`` or ``restart_ended``), how many do, and at how many all
     of them do. ``separate``: ``restart_ended`` does what it replaces, ``advance`` of the
     others, then ``reset`` of the ended scenarios, which runs their first interval's radio
-    besides the others' next interval's."""
+    besides the others' next interval's. ``reset_first``: the twin's restart draws the new
+    episodes' numbers before the interval's."""
 
-    def __init__(self, separate: bool = False):
+    def __init__(self, separate: bool = False, reset_first: bool = False):
         self.separate = separate
+        self.reset_first = reset_first
 
     def __enter__(self):
         from vdtn_marl.core.interval import IntervalEngine
+        from vdtn_marl.sim.twin import DigitalTwin
 
         self.radio_runs, self.resets, self.reset_rows, self.whole = 0, 0, 0, 0
         self._saved = (
             (IntervalEngine, "run_radio", IntervalEngine.run_radio),
             (IntervalEngine, "reset", IntervalEngine.reset),
             (IntervalEngine, "restart_ended", IntervalEngine.restart_ended),
+            (DigitalTwin, "restart", DigitalTwin.restart),
         )
-        radio, reset, restart = (saved[2] for saved in self._saved)
+        radio, reset, restart = (saved[2] for saved in self._saved[:3])
         separate = self.separate
 
         def counted_restart(engine, going):
@@ -106,6 +114,13 @@ class Counts:
         IntervalEngine.run_radio = counted_radio
         IntervalEngine.reset = counted_reset
         IntervalEngine.restart_ended = counted_restart
+        if self.reset_first:
+
+            def restart_reset_first(twin, mask):
+                twin.reset(mask=mask, begin=False)
+                twin.begin_interval()
+
+            DigitalTwin.restart = restart_reset_first
         return self
 
     def __exit__(self, *exc):
@@ -131,10 +146,10 @@ def load_loop(checkpoint: Path, run_dir: Path):
     return loop
 
 
-def collect(trainer, iterations: int, separate: bool = False) -> list[dict]:
+def collect(trainer, iterations: int, arm: str = "run") -> list[dict]:
     rows = []
     for _ in range(iterations):
-        with Counts(separate) as counts:
+        with Counts(arm == "separate", arm == "reset_first") as counts:
             began, began_cpu = time.perf_counter(), time.process_time()
             data = trainer.collect()
             seconds, cpu = time.perf_counter() - began, time.process_time() - began_cpu
@@ -191,12 +206,13 @@ def main(argv=None) -> int:
                 trainer._carry = None if arm == "fresh" else carry.clone()
                 if arm == "fresh":  # reset, then one collection untimed, as stage_throughput.py
                     collect(trainer, 1)
-                runs[arm] += collect(trainer, args.iterations, separate=arm == "separate")
+                runs[arm] += collect(trainer, args.iterations, arm)
         policy = type(loop.rra_slot.policy).__name__
         batch = tuple(trainer.env.batch_size)
     arms = {arm: summarise(rows) for arm, rows in runs.items()}
     ratio = arms["run"]["collect_s"] / arms["fresh"]["collect_s"]
     saved = arms["run"]["collect_s"] / arms["separate"]["collect_s"]
+    kept = arms["run"]["collect_s"] / arms["reset_first"]["collect_s"]
     result = {
         **provenance("steady_state_resets"),
         "load_average_start": list(load_start),
@@ -208,19 +224,21 @@ def main(argv=None) -> int:
         "arms": arms,
         "run_over_fresh_collect_s": ratio,
         "run_over_separate_collect_s": saved,
+        "run_over_reset_first_collect_s": kept,
         "runs": runs,
     }
     print(f"\nπ̃ at PPO iteration {start_iteration}, B = {batch[0]}, RRA policy {policy}")
     print(
-        f"{'arm':<8} {'collect s':>9} {'radio/int':>9} {'reset int/it':>12} {'reset scen/it':>13}"
+        f"{'arm':<11} {'collect s':>9} {'radio/int':>9} {'reset int/it':>12} {'reset scen/it':>13}"
     )
     for arm, s in arms.items():
         print(
-            f"{arm:<8} {s['collect_s']:>9.2f} {s['radio_runs_per_interval']:>9.2f} "
+            f"{arm:<11} {s['collect_s']:>9.2f} {s['radio_runs_per_interval']:>9.2f} "
             f"{s['reset_intervals_per_iteration']:>12.1f} "
             f"{s['reset_scenarios_per_iteration']:>13.1f}"
         )
     print(f"run / separate collection seconds: {saved:.2f} (one restart start against two)")
+    print(f"run / reset_first collection seconds: {kept:.2f} (the draws made ahead kept)")
     print(f"run / fresh collection seconds: {ratio:.2f}")
     atomic_write_json(args.out, result)
     print(f"wrote {args.out}")

@@ -1,6 +1,6 @@
-"""benchmarks/steady_state_resets.py on a tiny JOCC run's checkpoint: both arms collect from
-the same weights, the run arm from the checkpoint's persisting scenarios, the fresh arm from a
-reset; the counts are those of the collections."""
+"""benchmarks/steady_state_resets.py on a tiny JOCC run's checkpoint: all arms collect from
+the same weights, the run, reset_first and separate arms from the checkpoint's persisting
+scenarios, the fresh arm from a reset; the counts are those of the collections."""
 
 import importlib.util
 import json
@@ -55,7 +55,7 @@ def checkpoint(tmp_path_factory) -> Path:
     return run_dir / "checkpoints" / "last.pt"
 
 
-def test_both_arms_collect_from_the_checkpoints_weights(checkpoint, tmp_path):
+def test_the_arms_collect_from_the_checkpoints_weights(checkpoint, tmp_path):
     out = tmp_path / "steady.json"
     script = _script()
     assert (
@@ -65,7 +65,8 @@ def test_both_arms_collect_from_the_checkpoints_weights(checkpoint, tmp_path):
     data = json.loads(out.read_text())
     assert data["rra_policy"] == "ActorPolicy"  # the RRA agents trained: π̃ runs under them
     assert data["pi_tilde_iteration"] == 4 and data["batch"] == [4]
-    for arm in ("run", "separate", "fresh"):
+    assert set(data["runs"]) == set(script.ARMS)
+    for arm in script.ARMS:
         rows = data["runs"][arm]
         assert len(rows) == 4 and all(r["intervals"] == 10 for r in rows)
         if arm == "separate":  # one radio run more per interval at which some (not all) end
@@ -78,9 +79,10 @@ def test_both_arms_collect_from_the_checkpoints_weights(checkpoint, tmp_path):
         counts = [(r["radio_runs"], r["reset_scenarios"]) for r in rows]
         assert counts[:2] == counts[2:]
     # episodes of 15 intervals, 10 per collection: some scenarios restart in every arm
-    for arm in ("run", "separate", "fresh"):
+    for arm in script.ARMS:
         assert sum(r["reset_scenarios"] for r in data["runs"][arm]) > 0
-    assert data["run_over_fresh_collect_s"] > 0 and data["run_over_separate_collect_s"] > 0
+    for ratio in ("fresh", "separate", "reset_first"):
+        assert data[f"run_over_{ratio}_collect_s"] > 0
 
 
 def test_refuses_a_missing_checkpoint_and_bad_counts(tmp_path, checkpoint, capsys):
@@ -91,3 +93,27 @@ def test_refuses_a_missing_checkpoint_and_bad_counts(tmp_path, checkpoint, capsy
     with pytest.raises(SystemExit):
         script.parse_args([str(checkpoint), "--repeats", "0"])
     assert "--repeats" in capsys.readouterr().err
+
+
+def test_the_reset_first_arm_draws_the_new_episodes_before_the_interval():
+    """Inside ``Counts(reset_first=True)`` a twin's restart is a reset drawn first and an
+    interval start after it (the order before ``DigitalTwin.restart``); outside, the twin's own."""
+    import copy
+
+    import torch
+
+    from vdtn_marl.sim.params import TwinParams
+    from vdtn_marl.sim.twin import DigitalTwin
+
+    own = DigitalTwin.restart
+    twin = DigitalTwin(TwinParams.from_overrides(episode_intervals=5), batch_size=6, seed=2)
+    mask = torch.tensor([True, False, False, True, False, False])
+    reset_first, restarted = copy.deepcopy(twin), copy.deepcopy(twin)
+    with _script().Counts(reset_first=True):
+        reset_first.restart(mask)
+    assert DigitalTwin.restart is own
+    twin.reset(mask=mask, begin=False)
+    twin.begin_interval()
+    restarted.restart(mask)
+    assert torch.equal(reset_first.tables.own_gain, twin.tables.own_gain)
+    assert not torch.equal(restarted.tables.own_gain, twin.tables.own_gain)
