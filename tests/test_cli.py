@@ -193,6 +193,7 @@ BAD_CONFIGS = [
     (["algo.lr_schedule=cosine"], "algo.lr_schedule='cosine'"),
     (["algo.activation=relu"], "algo.activation='relu'"),
     (["algo.validate_every=-1"], "algo.validate_every=-1"),
+    (["algo.update_threads=-1"], "algo.update_threads=-1"),
     (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
     (["algo.rra_burn_in_intervals=200"], "algo.rra_burn_in_intervals=200"),
     (["rra.rollout_intervals=0"], "rra.rollout_intervals=0"),

@@ -106,3 +106,30 @@ def test_performance_page_quotes_the_stage_sweep_as_generated():
     )
     assert quoted in page, quoted
     assert f"{best['first_iteration_min']:.1f} and {best['later_iteration_min']:.1f} min" in page
+
+
+def test_performance_page_quotes_the_two_cores_run_as_generated():
+    """docs/performance.md's *Two cores* table and estimates come from the committed JSON of
+    benchmarks/two_cores.py."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    run = json.loads((ROOT / "benchmarks/results/two_cores.json").read_text())
+    assert run["complete"] and len(run["rows"]) == 4
+    for r in run["rows"]:
+        low, high = r["one_over_shards_range"]
+        quoted = (
+            f"| {r['frames_per_iteration']:,} | {r['collect_one_s']:.2f} | "
+            f"{r['collect_shards_s']:.2f} | {r['one_over_shards']:.2f} ({low:.2f}–{high:.2f}) | "
+            f"{r['update_1_thread_s']:.2f} | {r['update_2_threads_s']:.2f} | "
+            f"{r['update_1_over_2']:.2f} |"
+        )
+        assert quoted in page, quoted
+    later, first = run["estimate"]["later"], run["estimate"]["first"]
+    quoted = (
+        f"add up to {later['one_min']:.1f} min in one process on one thread, "
+        f"{later['update_threads_min']:.1f} min with the updates on two threads "
+        f"({later['one_over_update_threads']:.2f}×), and {later['two_cores_min']:.1f} min with "
+        f"sharded collection too ({later['one_over_two']:.2f}×); the first iteration "
+        f"{first['one_min']:.1f}, {first['update_threads_min']:.1f} and "
+        f"{first['two_cores_min']:.1f} min"
+    )
+    assert quoted in page, quoted

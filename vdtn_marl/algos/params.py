@@ -45,6 +45,12 @@ class AlgoConfig:
     critic_coef: float = 1.0
     max_grad_norm: float = 1.0
     epochs: int = 4  # PPO epochs per collected batch
+    # torch CPU threads of each PPO update (GAE and the minibatch passes), the run's
+    # ``threads`` restored after it; 0: the run's ``threads`` throughout. The update's tensors
+    # are large enough for a second thread to pay, the collection's are not
+    # (benchmarks/two_cores.py); a thread count other than the run's moves results in the last
+    # bits (torch splits its sums and products over the threads)
+    update_threads: int = 0
     minibatch_size: int = 512  # transitions (scenario × step) per gradient step
     num_envs: int = 16  # B scenarios collected in parallel (vehicles)
     rollout_steps: int = 200  # control intervals per scenario per batch: whole 10 s episodes

@@ -244,7 +244,19 @@ class PPOTrainer:
 
     # ------------------------------------------------------------------ update
     def update(self, data: TensorDictBase) -> dict[str, float]:
-        """GAE, then ``algo.epochs`` passes of shuffled minibatches of the clipped loss."""
+        """GAE, then ``algo.epochs`` passes of shuffled minibatches of the clipped loss, on
+        ``algo.update_threads`` torch threads where that is set (the caller's restored)."""
+        threads = self.algo.update_threads
+        before = torch.get_num_threads()
+        if not threads or threads == before:
+            return self._update(data)
+        torch.set_num_threads(threads)
+        try:
+            return self._update(data)
+        finally:
+            torch.set_num_threads(before)
+
+    def _update(self, data: TensorDictBase) -> dict[str, float]:
         with torch.no_grad():
             self.loss.value_estimator(
                 data,

@@ -307,6 +307,7 @@ def validate(cfg: RunConfig) -> RunConfig:
     ):
         _positive_int(f"algo.{key}", getattr(a, key))
     _positive_int("algo.validate_every", a.validate_every, low=0)
+    _positive_int("algo.update_threads", a.update_threads, low=0, high=1024)
     # at least one interval of the episode is left after the burn-in
     _positive_int(
         "algo.rra_burn_in_intervals", a.rra_burn_in_intervals, low=0, high=s.episode_intervals - 1
