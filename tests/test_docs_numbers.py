@@ -133,3 +133,10 @@ def test_performance_page_quotes_the_two_cores_run_as_generated():
         f"{first['two_cores_min']:.1f} min"
     )
     assert quoted in page, quoted
+    profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
+    learned = next(r for r in run["rows"] if r["stage"] == "pi_tilde_learned")
+    quoted = (
+        f"under the learned RRA {learned['one_over_shards']:.2f}× faster at most",
+        f"take {later['one_min']:.1f} min there on one thread, {later['two_cores_min']:.1f} min",
+    )
+    assert all(q in profile for q in quoted), quoted
