@@ -140,3 +140,21 @@ def test_performance_page_quotes_the_two_cores_run_as_generated():
         f"take {later['one_min']:.1f} min there on one thread, {later['two_cores_min']:.1f} min",
     )
     assert all(q in profile for q in quoted), quoted
+
+
+def test_performance_page_quotes_the_clean_whole_run_as_generated():
+    """docs/performance.md's *A clean whole run* table comes from the committed JSON of
+    benchmarks/paper_stage_timings.py over that run."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    run = json.loads((ROOT / "benchmarks/results/paper_iteration_clean.json").read_text())
+    paper = run["runs"]["paper"]
+    assert [m["complete"] for m in paper["measured"]] == [True, True]
+    for m in paper["measured"]:
+        st = m["stages"]
+        quoted = (
+            f"| {st['control_perfect'] / 60:.1f} | {st['control_impaired'] / 60:.1f} | "
+            f"{st['rra'] / 60:.1f} | {st['evaluate'] / 60:.1f} | {m['wall_s'] / 60:.1f} | 30 |"
+        )
+        assert quoted in page, quoted
+    peak = run["time_v"]["paper"]["peak_rss_mb"]
+    assert f"peak RSS {peak:,.0f} MB" in page
