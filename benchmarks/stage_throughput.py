@@ -125,6 +125,17 @@ def _learned_rra(loop) -> None:
     loop.rra_slot.policy = loop.rra_policy()
 
 
+def stage_trainer(loop, stage: str):
+    """The trainer of ``stage`` (one of ``CONTROL_STAGES`` or ``rra``), with the RRA policy
+    that stage runs under: the RRA actor for ``pi_tilde_learned``, random RRA for
+    ``pi_tilde_random``."""
+    if stage == "pi_tilde_learned":
+        _learned_rra(loop)
+    elif stage == "pi_tilde_random":
+        loop.rra_slot.policy = loop.rra_policy()
+    return {"pi_star": loop.pi_star, "rra": loop.rra}.get(stage, loop.pi_tilde)
+
+
 def run_cell(cell: dict) -> dict:
     """Time one stage at one batch size in this process (see the module doc)."""
     stage, batch, iterations = cell["stage"], cell.get("batch"), cell["iterations"]
@@ -156,11 +167,7 @@ def run_cell(cell: dict) -> dict:
             out["seconds"] = time.perf_counter() - began
             out["cpu_seconds"] = time.process_time() - began_cpu
     else:
-        trainer = {"pi_star": loop.pi_star, "rra": loop.rra}.get(stage, loop.pi_tilde)
-        if stage == "pi_tilde_learned":
-            _learned_rra(loop)
-        elif stage == "pi_tilde_random":
-            loop.rra_slot.policy = loop.rra_policy()
+        trainer = stage_trainer(loop, stage)
         began, began_cpu = time.perf_counter(), time.process_time()
         trainer.fit_observation_scaling()
         out["scaling_s"] = time.perf_counter() - began

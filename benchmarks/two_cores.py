@@ -36,6 +36,7 @@ the table and the estimate of a results file from the timings it keeps.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import multiprocessing as mp
 import os
 import resource
@@ -98,27 +99,18 @@ def _trainer(stage: str, batch: int, rollout: int):
     else:
         overrides = [f"algo.num_envs={batch}", f"algo.rollout_steps={rollout}"]
     _, loop = st._loop(overrides)
-    trainer = {"pi_star": loop.pi_star, "rra": loop.rra}.get(stage, loop.pi_tilde)
-    if stage == "pi_tilde_learned":
-        st._learned_rra(loop)
-    elif stage == "pi_tilde_random":
-        loop.rra_slot.policy = loop.rra_policy()
+    trainer = st.stage_trainer(loop, stage)
     trainer.fit_observation_scaling()
     trainer.train_iteration()  # warm-up
     return trainer
 
 
 def _update_s(trainer, data, threads: int) -> float:
-    import torch
-
-    before = torch.get_num_threads()
-    torch.set_num_threads(threads)
-    try:
-        began = time.perf_counter()
-        trainer.update(data)
-        return time.perf_counter() - began
-    finally:
-        torch.set_num_threads(before)
+    """Seconds of one update on ``threads`` torch threads, as ``algo.update_threads`` runs it."""
+    trainer.algo = dataclasses.replace(trainer.algo, update_threads=threads)
+    began = time.perf_counter()
+    trainer.update(data)
+    return time.perf_counter() - began
 
 
 def worker(job: dict, barrier, results) -> None:
@@ -244,8 +236,9 @@ def summarise(runs: list[dict], stages: list[str]) -> list[dict]:
 
 def estimate(rows: list[dict], sizes: dict) -> dict | None:
     """Minutes of a JOCC iteration's training stages (first: π̃ under random RRA; later: under
-    the learned RRA) from the medians, one process against sharded collection with the update
-    on 2 threads; None unless every stage was measured."""
+    the learned RRA) from the medians: one process on 1 thread, one process with its updates on
+    2 threads, and sharded collection with the updates on 2 threads; None unless every stage
+    was measured."""
     by = {r["stage"]: r for r in rows}
     if set(by) != set(STAGES):
         return None
@@ -333,10 +326,10 @@ def summarise_file(path: Path) -> int:
     try:
         result = json.loads(path.read_text())
         runs, stages = result["runs"], list(dict.fromkeys(r["stage"] for r in result["runs"]))
+        result["rows"] = summarise(runs, stages)
+        result["estimate"] = estimate(result["rows"], result["paper_sizes"])
     except (OSError, ValueError, KeyError, TypeError) as error:
         raise SystemExit(f"--summarise {path}: not a two_cores.py results file ({error})") from None
-    result["rows"] = summarise(runs, stages)
-    result["estimate"] = estimate(result["rows"], result["paper_sizes"])
     atomic_write_json(path, result)
     show(result)
     print(f"wrote {path}")

@@ -416,3 +416,11 @@ def test_two_cores_refuses_bad_arguments(argv, flag, capsys):
     with pytest.raises(SystemExit) as refused:
         two_cores.parse_args(argv)
     assert flag in capsys.readouterr().err + str(refused.value.code)
+
+
+def test_two_cores_summarise_refuses_a_file_that_is_not_its_results(tmp_path):
+    bad = tmp_path / "other.json"
+    bad.write_text(json.dumps({"runs": []}))
+    with pytest.raises(SystemExit) as refused:
+        two_cores.main(["--summarise", str(bad)])
+    assert "--summarise" in str(refused.value.code) and "other.json" in str(refused.value.code)
