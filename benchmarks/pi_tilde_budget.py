@@ -97,13 +97,9 @@ def _mode_arithmetic(x, functions, weights):
     return F.softmax(logits, dim=-1).argmax(dim=-1)
 
 
-def _weights(mode) -> list:
-    params = mode.body.params
-    out = []
-    for index, function in enumerate(mode._functions):
-        if function is None:
-            out += [params[str(index)]["weight"], params[str(index)]["bias"]]
-    return out
+def _weights(mode, layers=None) -> list:
+    """The Linear layers' weights and biases in order (``layers``: ``mode.weights()``)."""
+    return [t for layer in (layers or mode.weights()) if layer is not None for t in layer]
 
 
 class Compiled:
@@ -120,27 +116,28 @@ class Compiled:
 
         self.link, self.networks = link, networks
         self.eager_kernel = link.link_major_arithmetic
-        self.eager_call = networks.CategoricalMode.__call__
+        # every call of the fast path (CategoricalMode.__call__ and .bound()) goes through _act
+        self.eager_call = networks.CategoricalMode._act
         self.kernel = torch.compile(self.eager_kernel, dynamic=False)
         arithmetic = torch.compile(_mode_arithmetic, dynamic=False)
 
         eager_call = self.eager_call
 
-        def call(mode, observation):
+        def call(mode, observation, layers):
             if observation.shape[0] != batch:
-                return eager_call(mode, observation)
-            return arithmetic(mode.scaler(observation), mode._functions, _weights(mode))
+                return eager_call(mode, observation, layers)
+            return arithmetic(mode.scaler(observation), mode._functions, _weights(mode, layers))
 
         self.call = call
 
     def __enter__(self):
         self.link.link_major_arithmetic = self.kernel
-        self.networks.CategoricalMode.__call__ = self.call
+        self.networks.CategoricalMode._act = self.call
         return self
 
     def __exit__(self, *exc):
         self.link.link_major_arithmetic = self.eager_kernel
-        self.networks.CategoricalMode.__call__ = self.eager_call
+        self.networks.CategoricalMode._act = self.eager_call
         return False
 
 

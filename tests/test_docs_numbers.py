@@ -158,3 +158,20 @@ def test_performance_page_quotes_the_clean_whole_run_as_generated():
         assert quoted in page, quoted
     peak = run["time_v"]["paper"]["peak_rss_mb"]
     assert f"peak RSS {peak:,.0f} MB" in page
+
+
+def test_performance_page_quotes_the_mode_shortcut_run_as_generated():
+    """docs/performance.md's *The mode without its probabilities* table comes from the
+    committed JSON of benchmarks/rra_mode_shortcut.py, whose arms acted bit for bit alike."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    run = json.loads((ROOT / "benchmarks/results/rra_mode_shortcut.json").read_text())
+    assert run["rows"]
+    for r in run["rows"]:
+        assert r["actions_bit_identical"]
+        quoted = (
+            f"| {r['batch_size']:,} | {r['reference_s']:.2f} | {r['shipped_s']:.2f} | "
+            f"{r['reference_over_shipped']:.2f} | {r['collect_reference_over_shipped']:.2f} | "
+            f"{r['near_rows']:,} of {r['mode_rows']:,} "
+            f"({r['long_way_calls']:,} of {r['mode_calls']:,} calls) |"
+        )
+        assert quoted in page, quoted

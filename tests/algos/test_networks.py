@@ -12,8 +12,10 @@ from vdtn_marl.algos.networks import (
     CategoricalMode,
     ObservationScaler,
     SigmoidTanh,
+    categorical_mode,
     make_actor,
     make_critic,
+    mode_shortcut,
 )
 from vdtn_marl.algos.params import ACTIVATIONS
 from vdtn_marl.algos.ppo import ActorPolicy
@@ -150,6 +152,53 @@ def test_fast_categorical_mode_reads_the_current_weights():
     after = policy(observation)
     assert not torch.equal(before, after)
     assert torch.equal(after, ActorPolicy(other, "agents").action(observation))
+
+
+def _distribution_mode(logits: torch.Tensor) -> torch.Tensor:
+    return torch.distributions.Categorical(logits=logits).mode
+
+
+def test_categorical_mode_is_the_distributions_mode_bit_for_bit(monkeypatch):
+    """Well separated logits take the argmax without the probabilities; logits closer than
+    the probabilities' rounding (whose Categorical mode is the first of them, not the
+    largest logit) and exact ties go the long way, for the whole call."""
+    torch.manual_seed(4)
+    logits = torch.randn(4096, 3, 16) * 3
+    expected = _distribution_mode(logits)
+    with monkeypatch.context() as patched:  # the fast path computes no softmax
+        patched.setattr(torch.nn.functional, "softmax", None)
+        assert torch.equal(categorical_mode(logits), expected)
+    near = torch.tensor([[0.0, 1e-8, -3.0], [2.0, 2.0, 1.0], [1e-8, 0.0, 2e-8]])
+    # the probabilities round equal: the mode is the first entry, the argmax another
+    assert torch.equal(_distribution_mode(near), torch.tensor([0, 0, 0]))
+    assert torch.equal(near.argmax(-1), torch.tensor([1, 0, 2]))
+    assert torch.equal(categorical_mode(near), torch.tensor([0, 0, 0]))
+    mixed = logits.clone()
+    mixed[17, 1, :3] = near[0]  # one near tie in a large call
+    mixed[17, 1, 3:] = -10.0
+    _, near_rows = mode_shortcut(mixed)  # that row alone goes the long way
+    assert near_rows.tolist() == [17 * 3 + 1]
+    assert torch.equal(categorical_mode(mixed), _distribution_mode(mixed))
+    assert categorical_mode(mixed)[17, 1] == 0
+    for bad in (float("nan"), float("inf"), -float("inf")):
+        odd = logits[:8].clone()
+        odd[3, 0, 5] = bad
+        assert torch.equal(categorical_mode(odd), _distribution_mode(odd))
+
+
+def test_bound_policy_acts_as_the_policy_with_the_weights_of_its_binding():
+    """``ActorPolicy.bound()`` (one interval's radio) acts as the policy does; a binding made
+    after new weights were loaded acts with them."""
+    torch.manual_seed(5)
+    actor, other = _discrete_actor(), _discrete_actor()
+    policy = ActorPolicy(actor, "agents")
+    observation = torch.rand(512, N_AGENTS, N_OBS) * 2 - 1
+    bound = policy.bound()
+    assert torch.equal(bound(observation), policy(observation))
+    actor.load_state_dict(other.state_dict())
+    assert torch.equal(policy.bound()(observation), ActorPolicy(other, "agents")(observation))
+    stochastic = ActorPolicy(actor, "agents", deterministic=False)
+    assert stochastic.bound() is stochastic
 
 
 def test_fast_categorical_mode_only_for_shared_discrete_actors():

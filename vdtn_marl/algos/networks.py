@@ -31,6 +31,7 @@ TanhNormal policy. Without a prior the policy starts from zero commands.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 
 import torch
@@ -357,19 +358,90 @@ class CategoricalMode:
             and shape[-1] == self.scaler.center.numel()
         )
 
-    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
-        x = self.scaler(observation)
+    def weights(self) -> list[tuple[torch.Tensor, torch.Tensor] | None]:
+        """Per layer, the Linear layer's (weight, bias) as they are now, None for an
+        activation."""
         params = self.body.params
-        for index, function in enumerate(self._calls):
-            if function is None:
-                weights = params[str(index)]
-                x = F.linear(x, weights["weight"], weights["bias"])
-            else:
-                x = function(x)
-        logits = x - x.logsumexp(dim=-1, keepdim=True)  # as Categorical(logits=...) holds them
-        # Categorical.mode is probs.argmax; max's indices are argmax's (the first maximal
-        # entry of a row) and torch reduces a last axis of a few entries faster this way
-        return F.softmax(logits, dim=-1).max(dim=-1).indices
+        return [
+            (params[str(i)]["weight"], params[str(i)]["bias"]) if function is None else None
+            for i, function in enumerate(self._calls)
+        ]
+
+    def bound(self) -> Callable[[torch.Tensor], torch.Tensor]:
+        """:meth:`__call__` with the weights read once, now: for a run of calls in which the
+        weights cannot change (the 50 subframes of one interval's radio), without reading
+        the TensorDict of parameters at every call."""
+        weights = self.weights()
+        return lambda observation: self._act(observation, weights)
+
+    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        return self._act(observation, self.weights())
+
+    def _act(self, observation: torch.Tensor, weights) -> torch.Tensor:
+        x = self.scaler(observation)
+        for function, layer in zip(self._calls, weights, strict=True):
+            x = F.linear(x, *layer) if function is None else function(x)
+        return categorical_mode(x)
+
+
+#: How far (relative to the largest |logit| of a call, plus 1) a row's best logit must lead
+#: its others for :func:`categorical_mode` to take it without computing the probabilities.
+#: The probabilities' rounding moves a difference of logits by a few float32 ulps of the
+#: logits (≈ 1e-7 relative), so 1e-5 leaves a wide margin.
+MODE_MARGIN = 1e-5
+
+
+def categorical_mode(logits: torch.Tensor) -> torch.Tensor:
+    """The mode of ``torch.distributions.Categorical(logits=logits)`` [..., A] → long [...],
+    bit for bit: the first largest entry of the softmax of the logits normalised by their
+    logsumexp (what TorchRL's deterministic Categorical actor returns).
+
+    Mathematically that is the first largest logit; in float32 two logits closer than the
+    probabilities' rounding may give equal probabilities, and then the first of them is the
+    mode even if it is the smaller logit. On the CPU a row whose best logit leads the row's
+    others by more than :data:`MODE_MARGIN` × (1 + the call's largest |logit|) takes the argmax
+    of its logits (:func:`mode_shortcut`); the other rows, and every row on other devices
+    (where the check would wait for the device), compute the probabilities as Categorical
+    does. Each row's mode depends on that row alone, so both ways give the same numbers."""
+    shortcut = mode_shortcut(logits)
+    if shortcut is None:
+        return _mode_from_probabilities(logits)
+    modes, near_rows = shortcut
+    if near_rows is None:
+        return modes
+    flat = logits.reshape(-1, logits.shape[-1])
+    modes = modes.reshape(-1).index_copy(
+        0, near_rows, _mode_from_probabilities(flat.index_select(0, near_rows))
+    )
+    return modes.view(logits.shape[:-1])
+
+
+def _mode_from_probabilities(logits: torch.Tensor) -> torch.Tensor:
+    normalised = logits - logits.logsumexp(dim=-1, keepdim=True)  # as Categorical holds them
+    # Categorical.mode is probs.argmax; max's indices are argmax's (the first maximal entry
+    # of a row) and torch reduces a last axis of a few entries faster this way
+    return F.softmax(normalised, dim=-1).max(dim=-1).indices
+
+
+def mode_shortcut(logits: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | None] | None:
+    """On the CPU, the argmax of ``logits`` [..., A] and the flat indices of the rows where it
+    need not be the mode of :func:`categorical_mode` (None when there are none): rows in which
+    another logit comes within :data:`MODE_MARGIN` × (1 + the largest |logit|) of the best.
+    None on other devices and where a logit is inf or NaN."""
+    if logits.device.type != "cpu" or not 0 < logits.numel() < 2**24:
+        return None
+    top = logits.max(dim=-1)
+    low, high = logits.aminmax()
+    margin = MODE_MARGIN * (1.0 + max(-float(low), float(high)))
+    if not math.isfinite(margin):  # an inf or NaN among the logits
+        return None
+    # 1 for each entry above its row's best − margin (the best itself is), else 0; a float
+    # sum of fewer than 2**24 ones is exact (and cheaper than a bool compare and count)
+    near = (logits - (top.values - margin).unsqueeze(-1)).clamp_min_(0).sign_()
+    if int(near.sum()) == top.values.numel():  # each row's best alone within the margin
+        return top.indices, None
+    rows = near.reshape(-1, logits.shape[-1]).sum(dim=-1).gt(1.0).nonzero().flatten()
+    return top.indices, rows
 
 
 def make_critic(

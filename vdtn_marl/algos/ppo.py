@@ -39,7 +39,7 @@ import contextlib
 import copy
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import torch
@@ -488,6 +488,23 @@ class ActorPolicy:
             if self.mode.accepts(observation):
                 return self.mode(observation)
         return self.action(observation)
+
+    def bound(self) -> Callable[[torch.Tensor], torch.Tensor]:
+        """This policy with its weights read once, now: the same actions as :meth:`__call__`
+        for a run of calls during which the weights do not change (the 50 subframes of one
+        interval's radio, :meth:`~vdtn_marl.core.interval.IntervalEngine.run_radio`), without
+        reading the parameters' TensorDict at every call. Without the fast path, the policy
+        itself."""
+        if self.mode is None:
+            return self
+        mode, accepts = self.mode.bound(), self.mode.accepts
+
+        @torch.no_grad()
+        def act(observation: torch.Tensor) -> torch.Tensor:
+            observation = torch.as_tensor(observation, dtype=torch.float32)
+            return mode(observation) if accepts(observation) else self.action(observation)
+
+        return act
 
     def action(self, observation: torch.Tensor) -> torch.Tensor:
         """The actions as :meth:`__call__` gives them, differentiable in the actor's

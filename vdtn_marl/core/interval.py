@@ -203,11 +203,17 @@ class IntervalEngine:
         alone; the others act 0, which the masked step discards. When they are at most half
         the batch (a partial reset's few scenarios) the whole interval runs for them alone
         (:meth:`~vdtn_marl.sim.twin.DigitalTwin.run_subframes`: observations and kernel on b
-        scenarios, not B), with the same numbers."""
+        scenarios, not B), with the same numbers. A policy with a ``bound()`` method is asked
+        for its callable once per interval and that is called every subframe (a learned
+        policy reads its weights once: :meth:`~vdtn_marl.algos.ppo.ActorPolicy.bound`)."""
         twin = self.twin
         policy = policy or self.rra_policy
         validated = not self.validate_rra
         rows = self._policy_rows(mask, policy)
+        # the weights cannot change during one interval's radio: a policy that can read them
+        # once for a run of calls does (ActorPolicy.bound)
+        bind = getattr(policy, "bound", None)
+        policy = bind() if bind is not None else policy
         if rows is not None and twin.few_rows(mask) is not None:
             device = twin.device
 

@@ -113,6 +113,12 @@ class SwitchablePolicy:
         """The current policy's ``rowwise`` (IntervalEngine.run_radio)."""
         return bool(getattr(self.policy, "rowwise", False))
 
+    def bound(self):
+        """The current policy's ``bound()`` (its weights read once, for one interval's radio:
+        :meth:`~vdtn_marl.algos.ppo.ActorPolicy.bound`), or the current policy itself."""
+        bind = getattr(self.policy, "bound", None)
+        return bind() if bind is not None else self.policy
+
     def seed(self, seed: int | None) -> None:
         if hasattr(self.policy, "seed"):
             self.policy.seed(seed)
