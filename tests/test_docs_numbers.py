@@ -175,3 +175,7 @@ def test_performance_page_quotes_the_mode_shortcut_run_as_generated():
             f"({r['long_way_calls']:,} of {r['mode_calls']:,} calls) |"
         )
         assert quoted in page, quoted
+    profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
+    by_batch = {r["batch_size"]: r["reference_over_shipped"] for r in run["rows"]}
+    quoted = f"{by_batch[256]:.2f}× at B = 256 and {by_batch[1024]:.2f}× at B = 1,024"
+    assert quoted in profile, quoted
