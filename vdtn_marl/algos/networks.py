@@ -398,11 +398,12 @@ def categorical_mode(logits: torch.Tensor) -> torch.Tensor:
 
     Mathematically that is the first largest logit; in float32 two logits closer than the
     probabilities' rounding may give equal probabilities, and then the first of them is the
-    mode even if it is the smaller logit. On the CPU a row whose best logit leads the row's
-    others by more than :data:`MODE_MARGIN` × (1 + the call's largest |logit|) takes the argmax
-    of its logits (:func:`mode_shortcut`); the other rows, and every row on other devices
-    (where the check would wait for the device), compute the probabilities as Categorical
-    does. Each row's mode depends on that row alone, so both ways give the same numbers."""
+    mode even if it is the smaller logit. On the CPU (float32 or float64 logits) a row whose
+    best logit leads the row's others by more than :data:`MODE_MARGIN` × (1 + the call's
+    largest |logit|) takes the argmax of its logits (:func:`mode_shortcut`); the other rows,
+    and every row on other devices (where the check would wait for the device) or in coarser
+    dtypes, compute the probabilities as Categorical does. Each row's mode depends on that row
+    alone, so both ways give the same numbers."""
     shortcut = mode_shortcut(logits)
     if shortcut is None:
         return _mode_from_probabilities(logits)
@@ -427,8 +428,11 @@ def mode_shortcut(logits: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor | No
     """On the CPU, the argmax of ``logits`` [..., A] and the flat indices of the rows where it
     need not be the mode of :func:`categorical_mode` (None when there are none): rows in which
     another logit comes within :data:`MODE_MARGIN` × (1 + the largest |logit|) of the best.
-    None on other devices and where a logit is inf or NaN."""
-    if logits.device.type != "cpu" or not 0 < logits.numel() < 2**24:
+    None on other devices, for dtypes coarser than float32 (whose rounding the margin does not
+    cover) and where a logit is inf or NaN."""
+    if logits.device.type != "cpu" or logits.dtype not in (torch.float32, torch.float64):
+        return None
+    if not 0 < logits.numel() < 2**24:
         return None
     top = logits.max(dim=-1)
     low, high = logits.aminmax()
