@@ -44,10 +44,13 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
+from stage_throughput import CONTROL_FRAMES  # noqa: E402  (π̃'s samples per iteration)
+
 RESULTS = HERE / "results" / "pi_tilde_budget.json"
 STAGES = HERE / "results" / "stage_throughput.json"
 BUDGET_S = 30 * 60.0
-CONTROL_FRAMES = 64 * 400  # samples per π̃ iteration of experiment=paper (stage_throughput.py)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -72,13 +75,6 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.repeats < 1 or args.calls < 1:
         p.error(f"--repeats {args.repeats} and --calls {args.calls} must be >= 1")
     return args
-
-
-def _stage_script():
-    sys.path.insert(0, str(HERE))
-    import stage_throughput
-
-    return stage_throughput
 
 
 # ---------------------------------------------------------------------- compiled stand-ins
@@ -165,19 +161,8 @@ class RadioRuns:
 # ---------------------------------------------------------------------- one batch size
 def _iteration(trainer) -> dict:
     with RadioRuns() as radio:
-        began = time.perf_counter()
-        data = trainer.collect()
-        collected = time.perf_counter()
-        trainer.update(data)
-        trainer.iteration += 1
-        done = time.perf_counter()
-    return {
-        "collect_s": collected - began,
-        "update_s": done - collected,
-        "seconds": done - began,
-        "radio_runs": radio.count,
-        "intervals": int(data.shape[-1]),
-    }
+        row = stage_throughput.timed_iteration(trainer)
+    return {**row, "radio_runs": radio.count}
 
 
 def _per_call_us(fn, calls: int, blocks: int = 5) -> float:
@@ -201,7 +186,7 @@ def measure(batch: int, repeats: int, calls: int, frames: int = CONTROL_FRAMES) 
     from vdtn_marl.algos.networks import CategoricalMode
     from vdtn_marl.sim import link
 
-    st = _stage_script()
+    st = stage_throughput
     _, loop = st._loop([f"algo.num_envs={batch}", f"algo.rollout_steps={frames // batch}"])
     st._learned_rra(loop)
     trainer = loop.pi_tilde

@@ -29,12 +29,14 @@ import contextlib
 import os
 import statistics
 import sys
-import time
 from pathlib import Path
 
 HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
+from stage_throughput import CONTROL_FRAMES, timed_iteration  # noqa: E402
+
 RESULTS = HERE / "results" / "rra_mode_shortcut.json"
-CONTROL_FRAMES = 64 * 400  # samples per π̃ iteration of experiment=paper (stage_throughput.py)
 
 
 def parse_args(argv=None) -> argparse.Namespace:
@@ -103,31 +105,10 @@ class ShortcutCount:
         return False
 
 
-def _iteration(trainer) -> dict:
-    began = time.perf_counter()
-    data = trainer.collect()
-    collected = time.perf_counter()
-    trainer.update(data)
-    trainer.iteration += 1
-    done = time.perf_counter()
-    return {
-        "collect_s": collected - began,
-        "update_s": done - collected,
-        "seconds": done - began,
-    }
-
-
-def _stage_script():
-    sys.path.insert(0, str(HERE))
-    import stage_throughput
-
-    return stage_throughput
-
-
 def measure(batch: int, repeats: int, frames: int = CONTROL_FRAMES) -> dict:
     import torch
 
-    st = _stage_script()
+    st = stage_throughput
     _, loop = st._loop([f"algo.num_envs={batch}", f"algo.rollout_steps={frames // batch}"])
     trainer = st.stage_trainer(loop, "pi_tilde_learned")
     trainer.fit_observation_scaling()
@@ -142,10 +123,10 @@ def measure(batch: int, repeats: int, frames: int = CONTROL_FRAMES) -> dict:
         for arm in ("reference", "shipped") if repeat % 2 == 0 else ("shipped", "reference"):
             if arm == "reference":
                 with reference():
-                    ref.append(_iteration(trainer))
+                    ref.append(timed_iteration(trainer))
             else:
                 with ShortcutCount() as count:
-                    shipped.append(_iteration(trainer))
+                    shipped.append(timed_iteration(trainer))
                 calls, long_way = calls + count.calls, long_way + count.long_way
                 rows, near_rows = rows + count.rows, near_rows + count.near_rows
         observation = twin.rra_observation().clone()

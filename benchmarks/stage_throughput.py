@@ -136,6 +136,23 @@ def stage_trainer(loop, stage: str):
     return {"pi_star": loop.pi_star, "rra": loop.rra}.get(stage, loop.pi_tilde)
 
 
+def timed_iteration(trainer) -> dict:
+    """One PPO iteration of ``trainer`` as a run does it (collect, update), timed: wall
+    seconds of each part and of the whole, and the intervals collected."""
+    began = time.perf_counter()
+    data = trainer.collect()
+    collected = time.perf_counter()
+    trainer.update(data)
+    trainer.iteration += 1
+    done = time.perf_counter()
+    return {
+        "collect_s": collected - began,
+        "update_s": done - collected,
+        "seconds": done - began,
+        "intervals": int(data.shape[-1]),
+    }
+
+
 def run_cell(cell: dict) -> dict:
     """Time one stage at one batch size in this process (see the module doc)."""
     stage, batch, iterations = cell["stage"], cell.get("batch"), cell["iterations"]

@@ -46,6 +46,9 @@ import time
 from pathlib import Path
 
 HERE = Path(__file__).parent
+sys.path.insert(0, str(HERE))
+import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
+
 RESULTS = HERE / "results" / "two_cores.json"
 STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned", "rra")
 ARMS = ("one", "shards")
@@ -72,16 +75,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     return args
 
 
-def _stage_script():
-    sys.path.insert(0, str(HERE))
-    import stage_throughput
-
-    return stage_throughput
-
-
 def paper_sizes() -> dict:
     """The ``experiment=paper`` batch sizes and iteration budgets."""
-    budgets = _stage_script()._budgets()
+    budgets = stage_throughput._budgets()
     algo = budgets["paper_algo"]
     return {
         "control": (int(algo["num_envs"]), int(algo["rollout_steps"])),
@@ -93,7 +89,7 @@ def paper_sizes() -> dict:
 
 # ---------------------------------------------------------------------- a worker (a child)
 def _trainer(stage: str, batch: int, rollout: int):
-    st = _stage_script()
+    st = stage_throughput
     if stage == "rra":
         overrides = [f"algo.rra_num_envs={batch}", f"algo.rra_rollout_steps={rollout}"]
     else:

@@ -481,13 +481,8 @@ class ActorPolicy:
         shape may round a subset's products differently, which stays reproducible by seed."""
         return self.mode is not None
 
-    @torch.no_grad()
     def __call__(self, observation: torch.Tensor) -> torch.Tensor:
-        if self.mode is not None:
-            observation = torch.as_tensor(observation, dtype=torch.float32)
-            if self.mode.accepts(observation):
-                return self.mode(observation)
-        return self.action(observation)
+        return self._act(observation, self.mode)
 
     def bound(self) -> Callable[[torch.Tensor], torch.Tensor]:
         """This policy with its weights read once, now: the same actions as :meth:`__call__`
@@ -497,14 +492,17 @@ class ActorPolicy:
         itself."""
         if self.mode is None:
             return self
-        mode, accepts = self.mode.bound(), self.mode.accepts
+        mode = self.mode.bound()
+        return lambda observation: self._act(observation, mode)
 
-        @torch.no_grad()
-        def act(observation: torch.Tensor) -> torch.Tensor:
+    @torch.no_grad()
+    def _act(self, observation: torch.Tensor, mode) -> torch.Tensor:
+        """The fast path ``mode`` (the CategoricalMode or its binding) where it applies."""
+        if mode is not None:
             observation = torch.as_tensor(observation, dtype=torch.float32)
-            return mode(observation) if accepts(observation) else self.action(observation)
-
-        return act
+            if self.mode.accepts(observation):
+                return mode(observation)
+        return self.action(observation)
 
     def action(self, observation: torch.Tensor) -> torch.Tensor:
         """The actions as :meth:`__call__` gives them, differentiable in the actor's
