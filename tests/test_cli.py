@@ -194,6 +194,8 @@ BAD_CONFIGS = [
     (["algo.activation=relu"], "algo.activation='relu'"),
     (["algo.validate_every=-1"], "algo.validate_every=-1"),
     (["algo.update_threads=-1"], "algo.update_threads=-1"),
+    (["algo.collector_workers=-1"], "algo.collector_workers=-1"),
+    (["algo.collector_workers=3"], "algo.collector_workers=3"),
     (["algo.rra_lmbda=1.5"], "algo.rra_lmbda=1.5"),
     (["algo.rra_burn_in_intervals=200"], "algo.rra_burn_in_intervals=200"),
     (["rra.rollout_intervals=0"], "rra.rollout_intervals=0"),

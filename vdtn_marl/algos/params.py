@@ -12,6 +12,8 @@ from dataclasses import dataclass
 #: (benchmarks/activation_cost.py); it differs from torch.tanh by at most a few 1e-7
 #: (absolute), so results differ in the last bits
 ACTIVATIONS = ("tanh", "tanh_sigmoid")
+#: the most worker processes of ``algo.collector_workers`` (vdtn_marl/algos/shards.py)
+MAX_COLLECTOR_WORKERS = 64
 
 
 @dataclass
@@ -51,6 +53,10 @@ class AlgoConfig:
     # (benchmarks/two_cores.py); a thread count other than the run's moves results in the last
     # bits (torch splits its sums and products over the threads)
     update_threads: int = 0
+    # worker processes that collect the vehicle stages' persisting scenarios (π*, π̃), each
+    # num_envs / N of them on one core (vdtn_marl/algos/shards.py); 0: the trainer's process.
+    # A sharded run has scenarios and action samples of its own (reproducible by seed and N)
+    collector_workers: int = 0
     minibatch_size: int = 512  # transitions (scenario × step) per gradient step
     num_envs: int = 16  # B scenarios collected in parallel (vehicles)
     rollout_steps: int = 200  # control intervals per scenario per batch: whole 10 s episodes

@@ -20,7 +20,9 @@ across PPO iterations and are reset only where an episode ends, so batches sampl
 of the episode (not only the intervals after a reset, where the platoon is at its desired
 gaps); the first iteration starts from scenarios reset with ``seed_for(k)``. With
 ``persistent_envs=false`` every iteration ``k`` collects from freshly reset scenarios seeded
-with ``seed_for(k)``.
+with ``seed_for(k)``. With ``algo.collector_workers=N`` and an ``env_factory``, N worker
+processes hold the persisting scenarios, ``B / N`` each, and collect them together
+(:mod:`~vdtn_marl.algos.shards`).
 
 Credit (``active``): a callable that marks, from the observations, the agent-steps whose action
 has an effect (an RRA link with a CAM to send). The others' advantages are set to zero after
@@ -50,6 +52,7 @@ from torchrl.objectives import ClipPPOLoss, ValueEstimators
 
 from vdtn_marl.algos.networks import CategoricalMode, make_actor, make_critic, scalers
 from vdtn_marl.algos.params import AlgoConfig
+from vdtn_marl.algos.shards import ShardedCollector, continue_rollout
 
 #: Iteration seeds are spread so that no two iterations (or two runs with nearby seeds) share
 #: scenarios: seed_for(k) = seed · SEED_STRIDE + k.
@@ -105,6 +108,10 @@ class PPOTrainer:
         rollout_steps: steps per scenario per batch (default ``algo.rollout_steps``).
         gamma: discount per step of the group's clock (default ``algo.gamma``).
         lmbda: GAE λ per step of the group's clock (default ``algo.lmbda``).
+        env_factory: a picklable callable ``batch_size → environment`` that builds ``env``'s
+            like in a worker process: with ``algo.collector_workers=N`` (and persisting
+            scenarios) N workers collect the training batches
+            (:class:`~vdtn_marl.algos.shards.ShardedCollector`); without it, this process.
     """
 
     def __init__(
@@ -119,6 +126,7 @@ class PPOTrainer:
         gamma: float | None = None,
         lmbda: float | None = None,
         active=None,
+        env_factory=None,
     ):
         self.env = env
         self.active = active
@@ -178,6 +186,12 @@ class PPOTrainer:
         self.iteration = 0
         self.scaling_fitted = False
         self.stage: dict | None = None  # see begin_stage
+        self.shards: ShardedCollector | None = None
+        workers = int(getattr(algo, "collector_workers", 0) or 0)
+        if workers and env_factory is not None and self.persistent:
+            self.shards = ShardedCollector(
+                env_factory, int(env.batch_size.numel()), workers, self.actor
+            )
 
     # ------------------------------------------------------------------ data
     def seed_for(self, iteration: int) -> int:
@@ -200,16 +214,20 @@ class PPOTrainer:
                     auto_reset=False,
                     break_when_any_done=False,
                 )
+            if self.shards is not None:
+                return self.shards.collect(self.env, self.seed_for(k), self.rollout_steps)
             if self._carry is None:
                 self.env.set_seed(self.seed_for(k))
                 self._carry = self.env.reset()
-            steps, state = [], self._carry
-            for _ in range(self.rollout_steps):  # what EnvBase.rollout does, keeping the end
-                state = self.actor(state)
-                step, state = self.env.step_and_maybe_reset(state)
-                steps.append(step)
-            self._carry = state
-            return torch.stack(steps, dim=len(self.env.batch_size)).contiguous()
+            data, self._carry = continue_rollout(
+                self.env, self.actor, self._carry, self.rollout_steps
+            )
+            return data
+
+    def close(self) -> None:
+        """Stop the collector's worker processes, if any (``algo.collector_workers``)."""
+        if self.shards is not None:
+            self.shards.close()
 
     @contextlib.contextmanager
     def _env_kept(self):
@@ -423,6 +441,7 @@ class PPOTrainer:
 
     # ------------------------------------------------------------------ state
     def state_dict(self) -> dict:
+        shards = self.shards.state() if self.shards is not None else None
         return {
             "actor": self.actor.state_dict(),
             "critic": self.critic.state_dict(),
@@ -435,6 +454,7 @@ class PPOTrainer:
                 if self._carry is not None
                 else {}
             ),
+            **({"shards": shards} if shards is not None else {}),
         }
 
     def load_state_dict(self, state: dict) -> None:
@@ -445,6 +465,21 @@ class PPOTrainer:
         self.scaling_fitted = bool(state["scaling_fitted"])
         self.stage = copy.deepcopy(state.get("stage"))
         self._carry = None
+        shards = state.get("shards")
+        if shards is not None and self.shards is None:
+            raise ValueError(
+                f"algo.collector_workers=0 cannot continue a checkpoint whose scenarios "
+                f"{len(shards)} worker processes collected; set algo.collector_workers="
+                f"{len(shards)}"
+            )
+        if self.shards is not None:
+            if "carry" in state:
+                raise ValueError(
+                    f"algo.collector_workers={self.shards.workers} cannot continue a checkpoint "
+                    "whose scenarios the trainer's process collected; set "
+                    "algo.collector_workers=0"
+                )
+            self.shards.load(shards, self.env)
         if "carry" in state:
             carry = self.env.reset()  # a tensordict of the right structure (nested batch sizes)
             self.env.load_state_dict(state["env"])

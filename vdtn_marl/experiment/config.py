@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass, field, fields, is_dataclass, replace
 from typing import Any
 
-from vdtn_marl.algos.params import ACTIVATIONS, AlgoConfig
+from vdtn_marl.algos.params import ACTIVATIONS, MAX_COLLECTOR_WORKERS, AlgoConfig
 from vdtn_marl.algos.trainer import ALGORITHMS
 from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
 from vdtn_marl.errors import ConfigError
@@ -308,6 +308,18 @@ def validate(cfg: RunConfig) -> RunConfig:
         _positive_int(f"algo.{key}", getattr(a, key))
     _positive_int("algo.validate_every", a.validate_every, low=0)
     _positive_int("algo.update_threads", a.update_threads, low=0, high=1024)
+    _positive_int("algo.collector_workers", a.collector_workers, low=0, high=MAX_COLLECTOR_WORKERS)
+    if a.collector_workers:
+        if a.num_envs % a.collector_workers:
+            raise ConfigError(
+                f"algo.collector_workers={a.collector_workers} must divide "
+                f"algo.num_envs={a.num_envs} (each worker collects an equal share)"
+            )
+        if str(cfg.device) != "cpu":
+            raise ConfigError(
+                f"algo.collector_workers={a.collector_workers} needs device=cpu (got "
+                f"{cfg.device!r}; on a GPU one process collects the whole batch)"
+            )
     # at least one interval of the episode is left after the burn-in
     _positive_int(
         "algo.rra_burn_in_intervals", a.rra_burn_in_intervals, low=0, high=s.episode_intervals - 1

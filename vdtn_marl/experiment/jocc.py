@@ -39,7 +39,7 @@ import copy
 import logging
 import sys
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -124,6 +124,35 @@ class SwitchablePolicy:
             self.policy.seed(seed)
 
 
+@dataclass
+class TrainingEnvFactory:
+    """Builds a vehicle stage's training environment (``mode``: ``control`` for π*,
+    ``control_impaired`` for π̃) in a collector worker (``algo.collector_workers``,
+    :mod:`vdtn_marl.algos.shards`), with the arguments of the trainer's own but the batch.
+    π̃'s holds an RRA slot; the workers' slots get the trainer's policy whenever JOCC swaps it
+    (:meth:`policy_of`, :meth:`install`)."""
+
+    mode: str
+    kwargs: dict[str, Any] = field(default_factory=dict)
+    params: Any = None  # TwinParams: the slot's placeholder until the first policy arrives
+    seed: int = 0
+
+    def __call__(self, batch_size: int) -> VDTNTorchRLEnv:
+        kwargs = dict(self.kwargs, batch_size=batch_size)
+        if self.mode == "control_impaired":
+            placeholder = make_rra_baseline("random", self.params, self.seed)
+            kwargs["rra_policy"] = SwitchablePolicy(placeholder)
+        return VDTNTorchRLEnv(self.mode, **kwargs)
+
+    def policy_of(self, env: VDTNTorchRLEnv):
+        """The policy in ``env``'s RRA slot (None without one)."""
+        slot = env.rra_policy
+        return slot.policy if isinstance(slot, SwitchablePolicy) else None
+
+    def install(self, env: VDTNTorchRLEnv, policy) -> None:
+        env.rra_policy.policy = policy
+
+
 def trace_sources(cfg: RunConfig) -> tuple[str | TraceSource, str | TraceSource]:
     """The scenario's leader traces for training and for evaluation: a named trace set
     (:func:`~vdtn_marl.data.selection.named_sources`: a recorded one split in time) or a
@@ -172,7 +201,12 @@ class JointOptimisation:
         make_trainer = trainer_class(algo.name)  # vdtn_marl/algos/trainer.py: ALGORITHMS
 
         self.pi_star = make_trainer(
-            VDTNTorchRLEnv("control", **env_kw), "vehicle", algo, seed=cfg.seed * 8, prior=cacc
+            VDTNTorchRLEnv("control", **env_kw),
+            "vehicle",
+            algo,
+            seed=cfg.seed * 8,
+            prior=cacc,
+            env_factory=TrainingEnvFactory("control", env_kw),
         )
         self._user_policies: dict[str, Any] = {}  # rra=policy, control=policy: built once
         self.rra_slot = SwitchablePolicy(self.rra_policy(untrained=True))
@@ -190,6 +224,9 @@ class JointOptimisation:
             seed=cfg.seed * 8 + 1,
             drop_features=drop,
             prior=cacc,
+            env_factory=TrainingEnvFactory(
+                "control_impaired", {**completion_kw, **env_kw}, self.params, cfg.seed
+            ),
         )
         # rra.value_fit=acting: the td estimator's v* is a copy of π*'s critic fitted on the
         # acting system's states before each RRA stage (value_fit.py); π*'s own is unchanged
@@ -530,6 +567,19 @@ class JointOptimisation:
             return self._run()
 
     def _run(self) -> dict[str, Any]:
+        try:
+            return self._run_stages()
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop the trainers' collector workers (``algo.collector_workers``)."""
+        for trainer in self.trainers().values():
+            close = getattr(trainer, "close", None)
+            if close is not None:
+                close()
+
+    def _run_stages(self) -> dict[str, Any]:
         cfg = self.cfg
         resumed = cfg.resume and self.resume()
         began = time.perf_counter()
