@@ -150,6 +150,7 @@ def run_arm(stage: str, seed: int, shape: tuple[int, int], args, extra=()) -> di
         if trainer.iteration % args.eval_every == 0:
             evaluations.append({"iteration": trainer.iteration, "frames": frames, **score()})
     trainer.finish_stage()
+    loop.close()  # an arm's collector workers (algo.collector_workers), if any
     return {
         "stage": stage,
         "seed": seed,

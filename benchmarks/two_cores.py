@@ -9,7 +9,9 @@ A run (``vdtn-marl jocc``, ``threads=1``) uses one core for torch and, at B ≥ 
 the twin's draw-ahead thread on the second core for a small part of the time
 (``results/draw_ahead.json``). The idle core could run half of a stage's scenarios: k worker
 processes of B/k scenarios each collect B × rollout frames together, and the trainer updates
-on their joined batch. This script measures what that would gain before anyone builds it.
+on their joined batch. This script measures what that can gain at most, without the
+collector's messages; ``sharded_collection.py`` times the collector that is built
+(``algo.collector_workers``).
 
 Per stage (``pi_star``, ``pi_tilde_random``, ``pi_tilde_learned``, ``rra``: as in
 ``stage_throughput.py``, the ``experiment=paper`` loop and batch sizes) and repeat, two arms

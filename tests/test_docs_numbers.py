@@ -179,3 +179,47 @@ def test_performance_page_quotes_the_mode_shortcut_run_as_generated():
     by_batch = {r["batch_size"]: r["reference_over_shipped"] for r in run["rows"]}
     quoted = f"{by_batch[256]:.2f}× at B = 256 and {by_batch[1024]:.2f}× at B = 1,024"
     assert quoted in profile, quoted
+
+
+def test_performance_page_quotes_the_sharded_collection_run_as_generated():
+    """docs/performance.md's *Sharded collection* table and estimate, and the lines of
+    profile.md and CHANGELOG.md on it, come from the committed JSON of
+    benchmarks/sharded_collection.py (and its bound from two_cores_epyc.json)."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    run = json.loads((ROOT / "benchmarks/results/sharded_collection.json").read_text())
+    rows = {r["stage"]: r for r in run["rows"]}
+    assert set(rows) == {"pi_star", "pi_tilde_random", "pi_tilde_learned", "rra"}
+    for stage in ("pi_star", "pi_tilde_random", "pi_tilde_learned"):
+        r = rows[stage]
+        quoted = (
+            f"| {r['one_s']:.2f} | {r['sharded_s']:.2f} | {r['one_over_sharded']:.2f} | "
+            f"{r['collect_one_over_sharded']:.2f} | {r['sharded_threads_s']:.2f} | "
+            f"{r['one_over_sharded_threads']:.2f} |"
+        )
+        assert quoted in page, quoted
+    assert f"| RRA (not sharded) | {rows['rra']['one_s']:.2f} |" in page
+    e = run["estimate"]
+    quoted = (
+        f"take {e['one']['later_min']:.1f} min in one process, {e['sharded']['later_min']:.1f} "
+        f"min with two workers and {e['sharded_threads']['later_min']:.1f} min with the update "
+        f"on two threads too (first iteration {e['one']['first_min']:.1f}, "
+        f"{e['sharded']['first_min']:.1f} and {e['sharded_threads']['first_min']:.1f} min)"
+    )
+    assert quoted in page, quoted
+    bound = json.loads((ROOT / "benchmarks/results/two_cores_epyc.json").read_text())["rows"][0]
+    low, high = bound["one_over_shards_range"]
+    quoted = (
+        f"gives {bound['one_over_shards']:.2f}× ({low:.2f}–{high:.2f}) for π̃'s collection "
+        f"under the learned RRA and {bound['update_1_over_2']:.2f}× for the update"
+    )
+    assert quoted in page, quoted
+    learned = f"{rows['pi_tilde_learned']['one_over_sharded']:.2f}×"
+    profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
+    assert f"learned RRA {learned} faster with two workers" in profile
+    assert f"is {bound['one_over_shards']:.2f}× for its collection" in profile
+    changelog = _one_line((ROOT / "CHANGELOG.md").read_text(encoding="utf-8"))
+    assert f"learned RRA {learned} faster with 2 workers" in changelog
+    assert (
+        f"training stages {e['sharded']['later_min']:.1f} min against "
+        f"{e['one']['later_min']:.1f}" in changelog
+    )
