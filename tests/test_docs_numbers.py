@@ -223,3 +223,22 @@ def test_performance_page_quotes_the_sharded_collection_run_as_generated():
         f"training stages {e['sharded']['later_min']:.1f} min against "
         f"{e['one']['later_min']:.1f}" in changelog
     )
+
+
+def test_performance_page_quotes_the_sharded_pairing_as_generated():
+    """The paired learning check of algo.collector_workers=2 in docs/performance.md comes from
+    the committed JSONs of benchmarks/paper_batch_pairing.py."""
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    for stage, name in (("pi_star", "π\\*"), ("pi_tilde", "π̃, random RRA")):
+        run = json.loads(
+            (ROOT / f"benchmarks/results/paper_sharded_pairing_{stage}.json").read_text()
+        )
+        assert run["complete"] and run["new_overrides"] == ["algo.collector_workers=2"]
+        for r in (r for r in run["rows"] if r["iteration"] > 0):
+            assert r["seeds"] == 5
+            quoted = (
+                f"| {name} | {r['iteration']} ({r['frames']:,}) | {r['cost_old']:.4f} | "
+                f"{r['cost_new']:.4f} | {r['diff_mean']:+.4f} ({r['diff_min']:+.4f}, "
+                f"{r['diff_max']:+.4f}) | [{r['diff_t95_low']:+.4f}, {r['diff_t95_high']:+.4f}] |"
+            )
+            assert quoted in page, quoted

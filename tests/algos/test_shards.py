@@ -3,6 +3,8 @@ processes (vdtn_marl/algos/shards.py). Each worker's share is the batch the trai
 process would collect from the worker's seed; a sharded run resumes bit for bit."""
 
 import copy
+import os
+import signal
 import sys
 from dataclasses import replace
 
@@ -59,6 +61,8 @@ def test_each_worker_collects_what_its_seed_gives_in_one_process(one_thread):
     trainer, factory = _impaired_trainer()
     try:
         first = trainer.collect()
+        for process in trainer.shards._processes:  # Ctrl-C is the trainer's, not theirs
+            os.kill(process.pid, signal.SIGINT)
         second = trainer.collect()  # the workers' scenarios continue
     finally:
         trainer.close()

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import io
 import multiprocessing as mp
+import signal
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -85,7 +86,11 @@ def _install(factory, env, policy, seed: int) -> None:
 
 
 def _serve(conn, factory, batch_size: int, actor_bytes: bytes, threads: int) -> None:
-    """A worker: build the environment, then answer the trainer's messages until ``stop``."""
+    """A worker: build the environment, then answer the trainer's messages until ``stop``.
+    Ctrl-C is the trainer's to act on (it stops after its iteration and checkpoint,
+    vdtn_marl/io/interrupts.py), so the worker ignores SIGINT; it ends when the trainer's
+    process does (its pipe closes)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
         torch.set_num_threads(threads)
         env = factory(batch_size)
