@@ -9,8 +9,11 @@ finishes the stage, and saves and restores the trainer's state in checkpoints.
 A new algorithm is its trainer class (in a file of its own, with the members of
 :class:`Trainer` and the constructor of :class:`~vdtn_marl.algos.ppo.PPOTrainer`), one line in
 :data:`ALGORITHMS`, and ``conf/algo/<name>.yaml``; config validation, the JOCC loop and the
-tests read the registry. Entries are ``"module:Class"`` strings, imported when first used, so
-reading the registry (the CLI's config checks) does not import TorchRL.
+tests read the registry. The constructor's ``env_factory`` (for ``algo.collector_workers``,
+:mod:`~vdtn_marl.algos.shards`) may be ignored, and a ``close()`` that stops worker
+processes is optional (the JOCC loop calls it at the end of a run where it exists). Entries
+are ``"module:Class"`` strings, imported when first used, so reading the registry (the CLI's
+config checks) does not import TorchRL.
 """
 
 from __future__ import annotations
