@@ -139,12 +139,14 @@ def run_arm(stage: str, seed: int, shape: tuple[int, int], args, extra=()) -> di
         return {key: float(result.metrics[key]) for key in keys}
 
     evaluations = [{"iteration": 0, "frames": 0, **score()}]
-    cpu, wall, frames = [], [], 0
+    cpu, worker_cpu, wall, frames = [], [], [], 0
+    shards = getattr(trainer, "shards", None)  # algo.collector_workers
     trainer.begin_stage(args.iterations)
     for _ in range(args.iterations):
         began, began_cpu = time.perf_counter(), time.process_time()
         stats = trainer.train_iteration()
         cpu.append(time.process_time() - began_cpu)
+        worker_cpu.append(shards.last_cpu_s if shards is not None else 0.0)
         wall.append(time.perf_counter() - began)
         frames += shape[0] * shape[1]
         if trainer.iteration % args.eval_every == 0:
@@ -159,9 +161,27 @@ def run_arm(stage: str, seed: int, shape: tuple[int, int], args, extra=()) -> di
         "evaluations": evaluations,
         "last_reward_mean": float(stats.reward_mean),
         "cpu_s_per_iteration": statistics.median(cpu),
+        # the collector workers' CPU seconds of an iteration's collection (all together)
+        "worker_cpu_s_per_iteration": statistics.median(worker_cpu),
         "wall_s_per_iteration": statistics.median(wall),
         "load_average_1min_end": os.getloadavg()[0],
     }
+
+
+def _arm_cpu(run: dict) -> float | None:
+    """An arm's CPU seconds per iteration, its collector workers' included (None: a run with
+    workers that did not record theirs)."""
+    if "worker_cpu_s_per_iteration" not in run:
+        overrides = " ".join(run.get("overrides") or [])
+        if "collector_workers=" in overrides and "collector_workers=0" not in overrides:
+            return None
+        return run["cpu_s_per_iteration"]
+    return run["cpu_s_per_iteration"] + run["worker_cpu_s_per_iteration"]
+
+
+def _median_or_none(values) -> float | None:
+    values = list(values)
+    return None if any(v is None for v in values) else statistics.median(values)
 
 
 def pair_rows(runs: list[dict], stage: str) -> list[dict]:
@@ -193,14 +213,15 @@ def pair_rows(runs: list[dict], stage: str) -> list[dict]:
                 "diff_max": max(diffs),
                 "diff_t95_low": low,
                 "diff_t95_high": high,
-                "cpu_s_per_iteration_old": statistics.median(
-                    old[s]["cpu_s_per_iteration"] for s in seeds
-                ),
-                "cpu_s_per_iteration_new": statistics.median(
-                    new[s]["cpu_s_per_iteration"] for s in seeds
-                ),
-                "cpu_ratio_new_to_old": statistics.median(
-                    new[s]["cpu_s_per_iteration"] / old[s]["cpu_s_per_iteration"] for s in seeds
+                # the trainer's process and its collector workers; None where a run with
+                # workers did not record theirs
+                "cpu_s_per_iteration_old": _median_or_none(_arm_cpu(old[s]) for s in seeds),
+                "cpu_s_per_iteration_new": _median_or_none(_arm_cpu(new[s]) for s in seeds),
+                "cpu_ratio_new_to_old": _median_or_none(
+                    None
+                    if None in (_arm_cpu(new[s]), _arm_cpu(old[s]))
+                    else _arm_cpu(new[s]) / _arm_cpu(old[s])
+                    for s in seeds
                 ),
             }
         )
@@ -252,7 +273,7 @@ def main(argv=None) -> int:
                 print(
                     f"{stage:<8} seed {seed} {arm} {shape[0]}x{shape[1]} {' '.join(extra)}: cost "
                     f"{run['evaluations'][0]['control_cost']:.4f} -> {last['control_cost']:.4f}, "
-                    f"{run['cpu_s_per_iteration']:.2f} CPU s/iteration "
+                    f"{_arm_cpu(run):.2f} CPU s/iteration "
                     f"(load {run['load_average_1min_end']:.2f})",
                     flush=True,
                 )
@@ -274,8 +295,12 @@ def print_table(rows: list[dict]) -> None:
             f"{row['stage']:<8} {row['iteration']:>5} {row['frames']:>9,} "
             f"{row['cost_old']:>9.4f} {row['cost_new']:>9.4f} {row['diff_mean']:>+9.4f} "
             f"{interval:>21} {row['diff_min']:>+9.4f} {row['diff_max']:>+9.4f} "
-            f"{row['cpu_ratio_new_to_old']:>11.2f}"
+            f"{_number(row['cpu_ratio_new_to_old']):>11}"
         )
+
+
+def _number(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
 
 
 def summarize(path: Path) -> int:

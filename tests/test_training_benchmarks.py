@@ -158,6 +158,14 @@ def test_pairing_differences_are_taken_seed_by_seed():
     )
     assert last["cpu_ratio_new_to_old"] == pytest.approx((0.5 + 0.25) / 2)
     assert pairing.pair_rows(runs, "pi_tilde") == []
+    # an arm with collector workers: their CPU seconds count; unrecorded, no ratio at all
+    for run in runs[1::2]:
+        run.update(overrides=["algo.collector_workers=2"], worker_cpu_s_per_iteration=2.0)
+    last = pairing.pair_rows(runs, "pi_star")[-1]
+    assert last["cpu_ratio_new_to_old"] == pytest.approx((1.0 + 0.75) / 2)
+    del runs[1]["worker_cpu_s_per_iteration"]
+    last = pairing.pair_rows(runs, "pi_star")[-1]
+    assert last["cpu_ratio_new_to_old"] is None and last["cpu_s_per_iteration_new"] is None
 
 
 timings = _script("paper_stage_timings.py")

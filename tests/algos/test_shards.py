@@ -64,6 +64,7 @@ def test_each_worker_collects_what_its_seed_gives_in_one_process(one_thread):
         for process in trainer.shards._processes:  # Ctrl-C is the trainer's, not theirs
             os.kill(process.pid, signal.SIGINT)
         second = trainer.collect()  # the workers' scenarios continue
+        assert trainer.shards.last_cpu_s > 0.0  # the workers' CPU seconds of that collection
     finally:
         trainer.close()
     assert first.batch_size == torch.Size([4, 3])

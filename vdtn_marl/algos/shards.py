@@ -33,6 +33,7 @@ from __future__ import annotations
 import io
 import multiprocessing as mp
 import signal
+import time
 import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
@@ -107,6 +108,7 @@ def _serve(conn, factory, batch_size: int, actor_bytes: bytes, threads: int) -> 
             return
         try:
             if command == "collect":
+                began = time.process_time()
                 weights, policy, seed, steps = argument
                 actor.load_state_dict(_loads(weights))
                 if policy is not None:
@@ -117,7 +119,7 @@ def _serve(conn, factory, batch_size: int, actor_bytes: bytes, threads: int) -> 
                     carry = env.reset()
                 with torch.no_grad(), set_interaction_type(InteractionType.RANDOM):
                     data, carry = continue_rollout(env, actor, carry, steps)
-                conn.send(("ok", _dumps(data)))
+                conn.send(("ok", (_dumps(data), time.process_time() - began)))
             elif command == "state":
                 state = None
                 if carry is not None:
@@ -184,6 +186,8 @@ class ShardedCollector:
         self._processes: list = []
         self._sent_policy = None  # the policy object the workers hold (identity)
         self._pending: list | None = None  # worker states to load when they start
+        #: the workers' CPU seconds of the last collect() (all of them together)
+        self.last_cpu_s = 0.0
 
     # ------------------------------------------------------------------ processes
     @property
@@ -280,8 +284,9 @@ class ShardedCollector:
         policy = self._policy_message(env)
         for index, connection in enumerate(self._connections):
             connection.send(("collect", (weights, policy, shard_seed(seed, index), steps)))
-        batches = [_loads(data) for data in self._receive_all("collect")]
-        return torch.cat(batches, dim=0)
+        replies = self._receive_all("collect")
+        self.last_cpu_s = sum(cpu for _, cpu in replies)
+        return torch.cat([_loads(data) for data, _ in replies], dim=0)
 
     def state(self) -> list | None:
         """Every worker's scenarios, where they continue and its generator (None before the
