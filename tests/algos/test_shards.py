@@ -22,7 +22,13 @@ from vdtn_marl.policies import make_rra_baseline
 from vdtn_marl.sim.params import TwinParams
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
-from test_training import TINY_ALGO, TINY_EXPERIMENT, _all_params, tiny_config  # noqa: E402
+from test_training import (  # noqa: E402
+    TINY_ALGO,
+    TINY_EXPERIMENT,
+    _all_params,
+    interrupt_and_resume,
+    tiny_config,
+)
 
 ALGO = AlgoConfig(num_envs=4, rollout_steps=3, minibatch_size=12, epochs=1, collector_workers=2)
 ENV_KW = {"seed": 0, "episode_intervals": 20}
@@ -189,25 +195,6 @@ def test_sharded_jocc_resumes_bit_for_bit_under_the_learned_rra(tmp_path, monkey
     assert isinstance(straight.rra_slot, SwitchablePolicy)
     assert isinstance(straight.rra_slot.policy, ActorPolicy)  # π̃ of iteration 1
 
-    interrupted = JointOptimisation(cfg, tmp_path / "resumed")
-    original = PPOTrainer.train_iteration
-    calls = {"n": 0}
-
-    def crash(self):
-        calls["n"] += 1
-        if calls["n"] == 17:  # in π̃'s stage of JOCC iteration 1, after its checkpoint
-            raise KeyboardInterrupt
-        return original(self)
-
-    monkeypatch.setattr(PPOTrainer, "train_iteration", crash)
-    with pytest.raises(KeyboardInterrupt):
-        interrupted.run()
-    monkeypatch.setattr(PPOTrainer, "train_iteration", original)
+    # Ctrl-C in π̃'s stage of JOCC iteration 1 (the run's 17th PPO iteration), after a checkpoint
+    interrupted = interrupt_and_resume(cfg, tmp_path, monkeypatch, 17, reference)
     assert not interrupted.pi_tilde.shards.started  # the run stopped its workers
-
-    resumed = JointOptimisation(replace(cfg, resume=True), tmp_path / "resumed")
-    assert resumed.run()["resumed"] is True
-    for a, b in zip(reference, _all_params(resumed), strict=True):
-        assert torch.equal(a, b)
-    strip = [r.rsplit(",", 1)[0] for r in (tmp_path / "straight" / "metrics.csv").open()]
-    assert strip == [r.rsplit(",", 1)[0] for r in (tmp_path / "resumed" / "metrics.csv").open()]

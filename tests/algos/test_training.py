@@ -572,7 +572,14 @@ def test_jocc_resumes_bit_for_bit_in_each_stage_of_two_iterations(tmp_path, monk
     for a, b in zip(reference, _all_params(loaded), strict=True):
         assert torch.equal(a, b)
 
-    interrupted = JointOptimisation(cfg, tmp_path / "resumed")
+    interrupt_and_resume(cfg, tmp_path, monkeypatch, crash_at, reference)
+
+
+def interrupt_and_resume(cfg, root: Path, monkeypatch, crash_at: int, reference) -> object:
+    """Run ``cfg``'s JOCC in ``root/resumed``, stopped by Ctrl-C in the ``crash_at``-th PPO
+    iteration, then resumed; assert that it ends with the weights ``reference`` and the
+    metrics rows of the straight run in ``root/straight``. Returns the interrupted loop."""
+    interrupted = JointOptimisation(cfg, root / "resumed")
     original = PPOTrainer.train_iteration
     calls = {"n": 0}
 
@@ -587,9 +594,10 @@ def test_jocc_resumes_bit_for_bit_in_each_stage_of_two_iterations(tmp_path, monk
         interrupted.run()
     monkeypatch.setattr(PPOTrainer, "train_iteration", original)
 
-    resumed = JointOptimisation(replace(cfg, resume=True), tmp_path / "resumed")
+    resumed = JointOptimisation(replace(cfg, resume=True), root / "resumed")
     assert resumed.run()["resumed"] is True
     for a, b in zip(reference, _all_params(resumed), strict=True):
         assert torch.equal(a, b)
-    strip = [r.rsplit(",", 1)[0] for r in (tmp_path / "straight" / "metrics.csv").open()]
-    assert strip == [r.rsplit(",", 1)[0] for r in (tmp_path / "resumed" / "metrics.csv").open()]
+    strip = [r.rsplit(",", 1)[0] for r in (root / "straight" / "metrics.csv").open()]
+    assert strip == [r.rsplit(",", 1)[0] for r in (root / "resumed" / "metrics.csv").open()]
+    return interrupted
