@@ -242,3 +242,14 @@ def test_performance_page_quotes_the_sharded_pairing_as_generated():
                 f"{r['diff_max']:+.4f}) | [{r['diff_t95_low']:+.4f}, {r['diff_t95_high']:+.4f}] |"
             )
             assert quoted in page, quoted
+
+
+def test_profile_page_quotes_the_headline_cam_delivery_as_generated():
+    """docs/profile.md's reason for not skipping the RRA policy on delivered links quotes the
+    headline leaderboard's CAM delivery rates."""
+    stats = HEADLINE["statistics"][HEADLINE["target"]["scenario"]]
+    jocc = 100 * stats[HEADLINE["target"]["method"]]["cam_delivery_rate"]["mean"]
+    drra = 100 * stats[HEADLINE["target"]["reference"]]["cam_delivery_rate"]["mean"]
+    profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
+    assert f"delivers {jocc:.1f} % of CAMs on platoon4 (DRRA {drra:.1f} %;" in profile
+    assert f"spare under {jocc:.1f} % of the policy's rows" in profile
