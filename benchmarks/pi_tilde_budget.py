@@ -3,6 +3,7 @@ gives, and the arithmetic it cannot avoid, against the 30-minute JOCC iteration 
 
     python benchmarks/pi_tilde_budget.py           # writes results/pi_tilde_budget.json
     python benchmarks/pi_tilde_budget.py --batch-sizes 64 --repeats 1 --out /tmp/pt.json
+    python benchmarks/pi_tilde_budget.py --budget-only  # the budget again, from the stored rows
 
 π̃ under the learned RRA is most of a later ``experiment=paper`` JOCC iteration
 (``results/stage_throughput.json``): every control interval runs T = 50 subframes, each one
@@ -27,9 +28,10 @@ on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
    TensorDicts, Python) counts as free. It is a floor for torch on this CPU as long as the
    network's products and activations stay torch's (MKL's GEMM, torch's activation kernels);
    a hand-fused kernel could save the activations' memory passes, not the products.
-3. **The budget**: from ``results/stage_throughput.json`` (its chosen sizes, a later JOCC
-   iteration), the seconds of every other stage, hence the seconds per π̃ iteration that
-   would leave a JOCC iteration within 30 minutes; the speed-up needed over that file's π̃ and
+3. **The budget**: from ``results/stage_throughput.json`` (its chosen sizes, and under
+   ``paper`` the ``experiment=paper`` sizes; a later JOCC iteration), the seconds of every
+   other stage, hence the seconds per π̃ iteration that would leave a JOCC iteration within
+   30 minutes; the speed-up needed over that file's π̃ and
    the speed-up the floor allows over this run's eager iteration (a ratio within one run).
 """
 
@@ -66,6 +68,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     )
     p.add_argument("--stages", type=Path, default=STAGES, help="a stage_throughput.py result")
     p.add_argument("--out", type=Path, default=RESULTS)
+    p.add_argument(
+        "--budget-only",
+        action="store_true",
+        help="recompute the budget of the result at --out from --stages; time nothing",
+    )
     args = p.parse_args(argv)
     if args.frames < 1:
         p.error(f"--frames {args.frames} must be >= 1")
@@ -302,11 +309,24 @@ def _kernel_interval(batch: int):
 # ---------------------------------------------------------------------- the budget
 def budget(stages_path: Path, rows: list[dict]) -> dict:
     """The π̃ seconds per iteration that fit a 30-minute later JOCC iteration, from a
-    ``stage_throughput.py`` result, and whether the floor measured here could get there."""
+    ``stage_throughput.py`` result, and whether the floor measured here could get there: at
+    that result's fastest sizes (``estimate``), and under ``paper`` at the ``experiment=paper``
+    sizes (``estimate_paper``), where the file has them."""
     if not stages_path.is_file():
         return {"stages": str(stages_path), "missing": True}
     stages = json.loads(stages_path.read_text())
-    est = stages["estimate"]
+    out = {
+        "stages": stages_path.name,
+        "stages_written": stages.get("written"),
+        **_fit(stages["estimate"], rows),
+    }
+    if "estimate_paper" in stages:
+        out["paper"] = _fit(stages["estimate_paper"], rows)
+    return out
+
+
+def _fit(est: dict, rows: list[dict]) -> dict:
+    """:func:`budget` for one estimate of ``stage_throughput.py`` (its batch sizes)."""
     seconds = est["seconds"]
     iterations = est["budgets"]["control_iterations"]
     later = est["later_iteration_s"]
@@ -316,8 +336,6 @@ def budget(stages_path: Path, rows: list[dict]) -> dict:
     control = est["chosen_batches"]["control"]
     measured = pi_tilde / iterations
     out = {
-        "stages": stages_path.name,
-        "stages_written": stages.get("written"),
         "chosen_control_batch": control,
         "later_iteration_min": later / 60.0,
         "other_stages_min": others / 60.0,
@@ -332,8 +350,43 @@ def budget(stages_path: Path, rows: list[dict]) -> dict:
     return out
 
 
+def _print_budget(b: dict) -> None:
+    if b.get("missing"):
+        return
+    for name, fit in (("fastest sizes", b), ("experiment=paper sizes", b.get("paper"))):
+        if fit is None:
+            continue
+        print(
+            f"30-min JOCC iteration at the {name} ({b['stages']}, {b['stages_written']}): other "
+            f"stages {fit['other_stages_min']:.1f} min, so π̃ needs ≤ "
+            f"{fit['allowed_pi_tilde_s_per_iteration']:.2f} s per iteration at B = "
+            f"{fit['chosen_control_batch']} ({fit['needed_speedup']:.2f}× its "
+            f"{fit['pi_tilde_s_per_iteration']:.2f} s); the floor here allows "
+            f"{fit.get('floor_speedup_here', float('nan')):.2f}×"
+        )
+
+
+def rebudget(args) -> int:
+    """``--budget-only``: recompute the budget of the result at ``--out`` from its stored rows
+    and ``--stages``, without timing anything; the rows and their provenance stay."""
+    from vdtn_marl.io.files import atomic_write_json
+
+    if not args.out.is_file():
+        raise SystemExit(f"--budget-only: no result at --out {args.out}")
+    result = json.loads(args.out.read_text())
+    rows = result["rows"] if result.get("frames_per_iteration") == CONTROL_FRAMES else []
+    result["budget"] = budget(args.stages, rows)
+    result["budget"]["recomputed"] = time.strftime("%Y-%m-%d")
+    _print_budget(result["budget"])
+    atomic_write_json(args.out, result)
+    print(f"wrote {args.out}")
+    return 0
+
+
 def main(argv=None) -> int:
     args = parse_args(argv)
+    if args.budget_only:
+        return rebudget(args)
     import torch  # noqa: F401
 
     from vdtn_marl.io.files import atomic_write_json
@@ -368,16 +421,8 @@ def main(argv=None) -> int:
             f"{r['radio_runs_per_interval']:>9.2f} {r['floor_s']:>8.2f} "
             f"{r['eager_over_floor']:>11.2f}"
         )
-    b = result["budget"]
-    if not b.get("missing"):
-        print(
-            f"\n30-min JOCC iteration ({b['stages']}, {b['stages_written']}): other stages "
-            f"{b['other_stages_min']:.1f} min, so π̃ needs ≤ "
-            f"{b['allowed_pi_tilde_s_per_iteration']:.2f} s per iteration at B = "
-            f"{b['chosen_control_batch']} ({b['needed_speedup']:.2f}× its "
-            f"{b['pi_tilde_s_per_iteration']:.2f} s); the floor here allows "
-            f"{b.get('floor_speedup_here', float('nan')):.2f}×"
-        )
+    print()
+    _print_budget(result["budget"])
     atomic_write_json(args.out, result)
     print(f"wrote {args.out}")
     return 0

@@ -253,3 +253,26 @@ def test_profile_page_quotes_the_headline_cam_delivery_as_generated():
     profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
     assert f"delivers {jocc:.1f} % of CAMs on platoon4 (DRRA {drra:.1f} %;" in profile
     assert f"spare under {jocc:.1f} % of the policy's rows" in profile
+
+
+def test_profile_page_quotes_pi_tildes_budget_at_the_paper_sizes_as_generated():
+    """docs/profile.md and docs/performance.md quote benchmarks/pi_tilde_budget.py's budget at
+    the experiment=paper sizes (its JSON's ``budget.paper``) and the floor at B = 256."""
+    run = json.loads((ROOT / "benchmarks/results/pi_tilde_budget.json").read_text())
+    paper = run["budget"]["paper"]
+    assert paper["chosen_control_batch"] == 256 and not paper["reachable_at_the_floor"]
+    floor = next(r["floor_s"] for r in run["rows"] if r["batch_size"] == 256)
+    profile = _one_line((ROOT / "docs/profile.md").read_text(encoding="utf-8"))
+    quoted = (
+        f"the other stages take {paper['other_stages_min']:.1f} min and leave π̃ "
+        f"{paper['allowed_pi_tilde_s_per_iteration']:.2f} s per iteration, "
+        f"{paper['needed_speedup']:.2f}× under its {paper['pi_tilde_s_per_iteration']:.2f} s, "
+        f"where its floor at B = 256 ({floor:.2f} s) allows {paper['floor_speedup_here']:.2f}×"
+    )
+    assert quoted in profile, quoted
+    page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
+    quoted = (
+        f"it would need {paper['needed_speedup']:.2f}× at B = 256, against "
+        f"{paper['floor_speedup_here']:.2f}× that its arithmetic allows"
+    )
+    assert quoted in page, quoted

@@ -224,20 +224,25 @@ def test_compile_benchmark_writes_a_row_per_batch(tmp_path, capsys):
     assert "--repeats" in capsys.readouterr().err
 
 
-def _stages_file(path, later_s, pi_tilde_s, iterations=500, control=1024):
-    path.write_text(
-        json.dumps(
-            {
-                "written": "2026-01-01",
-                "estimate": {
-                    "seconds": {"pi_tilde_learned": pi_tilde_s},
-                    "budgets": {"control_iterations": iterations},
-                    "later_iteration_s": later_s,
-                    "chosen_batches": {"control": control, "rra": 512},
-                },
-            }
-        )
-    )
+def _estimate(later_s, pi_tilde_s, iterations, control):
+    return {
+        "seconds": {"pi_tilde_learned": pi_tilde_s},
+        "budgets": {"control_iterations": iterations},
+        "later_iteration_s": later_s,
+        "chosen_batches": {"control": control, "rra": 512},
+    }
+
+
+def _stages_file(path, later_s, pi_tilde_s, iterations=500, control=1024, paper=None):
+    """A stage_throughput.py result; ``paper`` (later_s, pi_tilde_s) adds its estimate at the
+    experiment=paper sizes (control batch 256)."""
+    data = {
+        "written": "2026-01-01",
+        "estimate": _estimate(later_s, pi_tilde_s, iterations, control),
+    }
+    if paper is not None:
+        data["estimate_paper"] = _estimate(*paper, iterations, 256)
+    path.write_text(json.dumps(data))
     return path
 
 
@@ -254,6 +259,35 @@ def test_pi_tilde_budget_leaves_pi_tilde_what_the_other_stages_leave_of_30_minut
     other_size = module.budget(stages, [{"batch_size": 256, "eager_over_floor": 9.0}])
     assert "reachable_at_the_floor" not in other_size
     assert module.budget(tmp_path / "absent.json", [])["missing"]
+    assert "paper" not in slow  # the file has no estimate at the paper sizes
+
+
+def test_pi_tilde_budget_also_fits_the_paper_sizes_and_recomputes_from_stored_rows(tmp_path):
+    module = _script("pi_tilde_budget.py")
+    # fastest sizes: others 1000 s, π̃ may take 1.6 s (needs 2.5×); paper sizes: others
+    # 1200 s, π̃ may take 1.2 s of its 6 s (needs 5×)
+    stages = _stages_file(tmp_path / "st.json", 3000.0, 2000.0, paper=(4200.0, 3000.0))
+    rows = [
+        {"batch_size": 1024, "eager_over_floor": 3.0},
+        {"batch_size": 256, "eager_over_floor": 4.0},
+    ]
+    fit = module.budget(stages, rows)
+    assert fit["reachable_at_the_floor"] is True
+    paper = fit["paper"]
+    assert paper["chosen_control_batch"] == 256
+    assert paper["allowed_pi_tilde_s_per_iteration"] == pytest.approx(1.2)
+    assert paper["needed_speedup"] == pytest.approx(5.0)
+    assert paper["floor_speedup_here"] == 4.0 and paper["reachable_at_the_floor"] is False
+    # --budget-only rewrites the budget of a stored result, its rows untouched
+    out = tmp_path / "pt.json"
+    stored = {"frames_per_iteration": module.CONTROL_FRAMES, "rows": rows, "budget": {}}
+    out.write_text(json.dumps(stored))
+    assert module.main(["--budget-only", "--stages", str(stages), "--out", str(out)]) == 0
+    result = json.loads(out.read_text())
+    assert result["rows"] == rows
+    assert result["budget"]["paper"]["reachable_at_the_floor"] is False
+    with pytest.raises(SystemExit, match="--out"):
+        module.main(["--budget-only", "--out", str(tmp_path / "absent.json")])
 
 
 def test_pi_tilde_budget_refuses_batch_sizes_that_do_not_divide_the_frames(capsys):
