@@ -307,11 +307,14 @@ def _kernel_interval(batch: int):
 
 
 # ---------------------------------------------------------------------- the budget
-def budget(stages_path: Path, rows: list[dict]) -> dict:
+def budget(stages_path: Path, rows: list[dict], frames: int = CONTROL_FRAMES) -> dict:
     """The π̃ seconds per iteration that fit a 30-minute later JOCC iteration, from a
     ``stage_throughput.py`` result, and whether the floor measured here could get there: at
     that result's fastest sizes (``estimate``), and under ``paper`` at the ``experiment=paper``
-    sizes (``estimate_paper``), where the file has them."""
+    sizes (``estimate_paper``), where the file has them. ``rows`` timed at other than the
+    paper's ``frames`` per iteration are not set against it."""
+    if frames != CONTROL_FRAMES:
+        rows = []
     if not stages_path.is_file():
         return {"stages": str(stages_path), "missing": True}
     stages = json.loads(stages_path.read_text())
@@ -374,8 +377,7 @@ def rebudget(args) -> int:
     if not args.out.is_file():
         raise SystemExit(f"--budget-only: no result at --out {args.out}")
     result = json.loads(args.out.read_text())
-    rows = result["rows"] if result.get("frames_per_iteration") == CONTROL_FRAMES else []
-    result["budget"] = budget(args.stages, rows)
+    result["budget"] = budget(args.stages, result["rows"], result["frames_per_iteration"])
     result["budget"]["recomputed"] = time.strftime("%Y-%m-%d")
     _print_budget(result["budget"])
     atomic_write_json(args.out, result)
@@ -404,7 +406,7 @@ def main(argv=None) -> int:
         "repeats": args.repeats,
         "frames_per_iteration": args.frames,
         "rows": rows,
-        "budget": budget(args.stages, rows if args.frames == CONTROL_FRAMES else []),
+        "budget": budget(args.stages, rows, args.frames),
     }
     print(
         f"\n{'B':>5} {'eager s':>8} {'compiled s':>10} {'eager/comp':>10} {'radio/int':>9} "

@@ -53,11 +53,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     p.add_argument("--pairs", type=int, default=5, help="timed rounds of the arms per stage")
     p.add_argument("--out", type=Path, default=RESULTS)
     args = p.parse_args(argv)
+    from vdtn_marl.algos.params import MAX_COLLECTOR_WORKERS
     from vdtn_marl.reporting.benchmarking import parse_names
 
     args.stages = parse_names("--stages", args.stages, STAGES)
-    if not 1 <= args.workers <= 64:
-        p.error(f"--workers {args.workers} must be in [1, 64]")
+    if not 1 <= args.workers <= MAX_COLLECTOR_WORKERS:
+        p.error(f"--workers {args.workers} must be in [1, {MAX_COLLECTOR_WORKERS}]")
     if args.pairs < 1:
         p.error(f"--pairs {args.pairs} must be >= 1")
     return args

@@ -278,6 +278,10 @@ def test_pi_tilde_budget_also_fits_the_paper_sizes_and_recomputes_from_stored_ro
     assert paper["allowed_pi_tilde_s_per_iteration"] == pytest.approx(1.2)
     assert paper["needed_speedup"] == pytest.approx(5.0)
     assert paper["floor_speedup_here"] == 4.0 and paper["reachable_at_the_floor"] is False
+    # rows timed at other samples per iteration are not set against the budget
+    other_frames = module.budget(stages, rows, frames=16)
+    assert "floor_speedup_here" not in other_frames
+    assert "floor_speedup_here" not in other_frames["paper"]
     # --budget-only rewrites the budget of a stored result, its rows untouched
     out = tmp_path / "pt.json"
     stored = {"frames_per_iteration": module.CONTROL_FRAMES, "rows": rows, "budget": {}}
