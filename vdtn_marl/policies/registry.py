@@ -28,12 +28,13 @@ if TYPE_CHECKING:
 # ------------------------------------------------------------------------------------- RRA
 #: The non-learned RRA policies, ``rra=<name>`` → ``"module:Class"`` of the policy, imported
 #: when first built: a class with ``from_params(params: TwinParams, seed: int | None)``.
-#: ``seed`` seeds the random one; the others are deterministic. Round robin and greedy transmit
-#: at the highest power level.
+#: ``seed`` seeds the random one; the others are deterministic. Round robin, greedy and
+#: opportunistic transmit at the highest power level.
 RRA_BASELINES: dict[str, str] = {
     "random": "vdtn_marl.policies.rra:RandomRRAPolicy",
     "round_robin": "vdtn_marl.policies.rra:RoundRobinRRAPolicy",
     "greedy": "vdtn_marl.policies.rra:GreedyRRAPolicy",
+    "opportunistic": "vdtn_marl.policies.opportunistic:OpportunisticRRAPolicy",
 }
 
 
