@@ -375,7 +375,7 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 def test_shipped_benchmarks_plan_their_grid():
     shipped = (
-        ("smoke", 14), ("reduced", 185), ("leaderboard", 180), ("sensitivity", 25),
+        ("smoke", 16), ("reduced", 185), ("leaderboard", 180), ("sensitivity", 25),
         ("headline", 20), ("value_fit", 15),
     )  # fmt: skip
     for name, cells in shipped:
@@ -412,7 +412,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
         assert "experiment.rra_iterations=16" in b.budgets[method], method
     assert not {"random", "round_robin", "greedy", "oracle"} & set(b.budgets)
     smoke = cli_help.read_conf_yaml("benchmark", "smoke.yaml")
-    assert smoke["version"] == "2.1" and smoke["experiment"] == "smoke"
+    assert smoke["version"] == "2.2" and smoke["experiment"] == "smoke"
     assert not any("jocc_iterations" in str(o) for o in smoke.get("budgets", {}).values())
     sens = cli_help.read_conf_yaml("benchmark", "sensitivity.yaml")
     assert (sens["version"], sens["scenarios"]) == ("1.0", ["platoon4_noise90"])
@@ -688,6 +688,13 @@ def test_smoke_writes_markdown_and_plots(smoke):
     assert "training and evaluation drives come from different vehicles" in text
     for method in b.methods:
         assert f"| {method} |" in text
+    data = _strict_json(smoke["report"] / leaderboard.STATS_JSON)
+    failed = [(r["method"], r["seed"]) for r in data["runs"] if not r["reference_ok"]]
+    assert [(f["method"], f["seed"]) for f in data["reference_failures"]] == failed
+    if failed:
+        assert f"**reference check FAILED in {len(failed)} of {len(data['runs'])} runs**" in text
+    else:
+        assert f"**reference check**: passed in all {len(data['runs'])} runs" in text
     assert "AoI mean (ms) ↓" in text and "peak AoI (ms) ↓" in text
     for kind in PLOT_KINDS:
         path = smoke["report"] / f"leaderboard_platoon4_{kind}.png"

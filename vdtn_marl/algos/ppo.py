@@ -306,6 +306,49 @@ class PPOTrainer:
                 steps += 1
         return {key: value / max(steps, 1) for key, value in sums.items()}
 
+    def fit_critic(self, iterations: int) -> dict[str, float]:
+        """Fit the critic alone to the current actor's returns before the actor's first update
+        (a warm-started actor's advantages are then measured, not drawn from an untrained
+        critic): ``iterations`` batches collected as training collects them, on each the
+        TD(λ) targets of GAE with the current critic, then ``algo.epochs`` passes of shuffled
+        minibatches of the critic loss. The actor, the iteration count and the stage do not
+        change. Returns the last batch's mean critic loss and explained variance."""
+        if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
+            raise ValueError(f"critic fit iterations={iterations!r} must be an integer >= 0")
+        if not self.scaling_fitted:
+            self.fit_observation_scaling()
+        loss_sum = variance_sum = 0.0
+        steps = 0
+        for _ in range(iterations):
+            data = self.collect()
+            with torch.no_grad():
+                self.loss.value_estimator(
+                    data,
+                    params=self.loss.critic_network_params,
+                    target_params=self.loss.target_critic_network_params,
+                )
+            flat = data.reshape(-1).select(*self._minibatch_keys(), strict=False)
+            n = flat.shape[0]
+            size = min(self.algo.minibatch_size, n)
+            loss_sum = variance_sum = 0.0  # the last batch's
+            steps = 0
+            for _ in range(self.algo.epochs):
+                order = torch.randperm(n, device=self.device)
+                for start in range(0, n - size + 1, size):
+                    loss, _, explained = self.loss.loss_critic(flat[order[start : start + size]])
+                    loss = loss.mean()
+                    self.optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    torch.nn.utils.clip_grad_norm_(self.loss.parameters(), self.algo.max_grad_norm)
+                    self.optimizer.step()
+                    loss_sum += float(loss.detach())
+                    variance_sum += math.nan if explained is None else float(explained.mean())
+                    steps += 1
+        return {
+            "loss_critic": loss_sum / steps if steps else math.nan,
+            "explained_variance": variance_sum / steps if steps else math.nan,
+        }
+
     def _minibatch_keys(self) -> list:
         """The keys the clipped loss reads from a minibatch: its inputs at the current step
         (observation, action, the collecting policy's log-probability) and GAE's outputs."""

@@ -262,6 +262,7 @@ def run_job(command: str, cfg: Any) -> dict:
     from vdtn_marl.algos.checkpoint import CheckpointError
     from vdtn_marl.errors import RunFileError, RunWriteError
     from vdtn_marl.experiment import api
+    from vdtn_marl.experiment.reference import REFERENCE_WARNING, row_problems
     from vdtn_marl.io.files import CONFIG_FILE, atomic_write_text, run_lock
     from vdtn_marl.io.interrupts import check_interrupt, graceful_interrupts
     from vdtn_marl.io.log import keep_log_off_console
@@ -292,11 +293,16 @@ def run_job(command: str, cfg: Any) -> dict:
         hint = interrupted_message(command, run_dir).removeprefix("interrupted; ")
         print(f"error: {exc.strerror}; {hint}", file=sys.stderr)
         raise SystemExit(1) from None
+    problems = row_problems(summary) if isinstance(summary, dict) else ""
     if HydraConfig.get().mode == RunMode.MULTIRUN:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
+        if problems:
+            print(f"warning: job {HydraConfig.get().job.num}: {REFERENCE_WARNING}{problems}")
         return summary
     if isinstance(summary, dict) and summary:
         print_summary(summary, title=f"{command} summary")
+    if problems:
+        print(f"warning: {REFERENCE_WARNING}{problems}", file=sys.stderr)
     print(f"run directory: {run_dir}")
     plots = sorted(str(p) for p in run_dir.rglob("*.png"))
     if plots:

@@ -101,6 +101,9 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
     loop = JointOptimisation(validate(cfg), run_dir, task=task)
     loop.load_policies(payload)
     loop.position["iteration"] = int(payload["position"]["iteration"])
+    # the reference comparators its run scored (π*'s start among them), where the scenarios
+    # are the same (JointOptimisation.reference_memo)
+    loop.position["reference"] = payload["position"].get("reference")
     row = loop.evaluate()
     summary = loop.summary(row["eval_seconds"], resumed=False)
     summary["checkpoint"] = str(Path(cfg.checkpoint).resolve())

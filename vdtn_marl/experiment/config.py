@@ -104,6 +104,14 @@ class ControlConfig:
     # the held-out city cycle against 12.6 % from the prior, docs/control_vs_oracle.md);
     # "none" starts PPO from the CACC prior
     warm_start: str = "causal_mpc"
+    # before π*'s first PPO update its critic alone is fitted to the start policy's returns on
+    # this many training batches (PPOTrainer.fit_critic), so that PPO's first advantages are
+    # measured; 0: none
+    pi_star_critic_warmup: int = 10
+    # algo.validate_every for π*: every N PPO iterations its deterministic policy is scored on
+    # fixed validation scenarios and the best is kept, the stage's start a candidate (so π*
+    # ends no worse than its start there); 0: π* keeps its last iterate
+    pi_star_validate_every: int = 10
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
     # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies.mpc_oracle)
     mpc_iterations: int | None = None
@@ -251,6 +259,8 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
     _choice("control.warm_start", c.warm_start, WARM_STARTS)
+    _positive_int("control.pi_star_critic_warmup", c.pi_star_critic_warmup, low=0)
+    _positive_int("control.pi_star_validate_every", c.pi_star_validate_every, low=0)
     if c.mpc_iterations is not None:
         _positive_int("control.mpc_iterations", c.mpc_iterations, high=100_000)
         if c.name not in MPC_CONTROLS:

@@ -139,11 +139,7 @@ def evaluate_stage(
 
     if video == "first":
         drawn["episode"] = 0
-    common = dict(
-        episodes=episodes, intervals=cfg.experiment.eval_intervals,
-        seed=EVAL_SEED_OFFSET + cfg.seed, gamma=cfg.algo.gamma, device=device,
-        trace_source=trace_source,
-    )  # fmt: skip
+    common = evaluation_scenarios(cfg, trace_source, device)
     began = time.perf_counter()
     optimal = evaluate_system(
         params, optimal_policy, None, perfect=True,
@@ -187,6 +183,32 @@ def evaluate_stage(
     return Evaluation(row, optimal, result, frames, drawn)
 
 
+def evaluation_scenarios(
+    cfg: RunConfig, trace_source: str | TraceSource, device: torch.device
+) -> dict[str, Any]:
+    """The keyword arguments of :func:`~vdtn_marl.algos.evaluate.evaluate_system` that fix a
+    run's held-out evaluation scenarios (the same at every evaluation of the run)."""
+    return dict(
+        episodes=cfg.experiment.eval_episodes, intervals=cfg.experiment.eval_intervals,
+        seed=EVAL_SEED_OFFSET + cfg.seed, gamma=cfg.algo.gamma, device=device,
+        trace_source=trace_source,
+    )  # fmt: skip
+
+
+def perfect_returns(
+    cfg: RunConfig,
+    params: TwinParams,
+    policy: Callable,
+    *,
+    trace_source: str | TraceSource,
+    device: torch.device,
+) -> torch.Tensor:
+    """Per-scenario discounted control returns [E] of ``policy`` on perfect observations over
+    the run's held-out evaluation scenarios (paired with every evaluation's)."""
+    scenarios = evaluation_scenarios(cfg, trace_source, device)
+    return evaluate_system(params, policy, None, perfect=True, **scenarios).returns
+
+
 def run_summary(
     cfg: RunConfig,
     task: str,
@@ -221,6 +243,8 @@ def run_summary(
         # with algo.validate_every: the trainer iteration whose weights each stage kept
         "selected_iterations": dict(position.get("selected_iterations", {})),
         "warm_start": position.get("warm_start"),
+        # control.pi_star_critic_warmup: π*'s critic fitted before its first update
+        "critic_warmup": position.get("critic_warmup"),
         # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
         "value_fit": position.get("value_fit"),
         "seconds": seconds,

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import logging
 import sys
 import time
@@ -58,7 +59,13 @@ from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.experiment import checkpoint, outputs, warm_start
 from vdtn_marl.experiment.config import RunConfig, to_dict, validate, validate_device
-from vdtn_marl.experiment.evaluate import ActingSystem, evaluate_stage, run_summary
+from vdtn_marl.experiment.evaluate import (
+    ActingSystem,
+    evaluate_stage,
+    perfect_returns,
+    run_summary,
+)
+from vdtn_marl.experiment.reference import reference_check, scenarios_memo, scored_once
 from vdtn_marl.io.files import (
     EVALUATION_FILE,
     SUMMARY_FILE,
@@ -203,7 +210,7 @@ class JointOptimisation:
         self.pi_star = make_trainer(
             VDTNTorchRLEnv("control", **env_kw),
             "vehicle",
-            algo,
+            dataclasses.replace(algo, validate_every=control.pi_star_validate_every),
             seed=cfg.seed * 8,
             prior=cacc,
             env_factory=TrainingEnvFactory("control", env_kw),
@@ -331,6 +338,7 @@ class JointOptimisation:
         cfg.threads = 0
         loop = cls(cfg, run_dir, task="jocc")
         loop.load_policies(saved)
+        loop.position["reference"] = saved.get("position", {}).get("reference")
         return loop
 
     def ivoi_estimator(
@@ -431,6 +439,8 @@ class JointOptimisation:
                 self.rra_slot.policy = self.rra_policy()
             if stage == "control_perfect" and trainer.iteration == 0:
                 self._warm_start_pi_star()
+                self._score_reference("start", ActorPolicy(self.pi_star.actor, "vehicle"))
+                self._fit_pi_star_critic()
             if stage == "rra" and self.v_fit is not None:
                 self._fit_value()
             self.position["stage_start"] = trainer.iteration
@@ -454,6 +464,17 @@ class JointOptimisation:
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
+
+    def _fit_pi_star_critic(self) -> None:
+        """``control.pi_star_critic_warmup``: π*'s critic alone learns its start policy's
+        returns before PPO's first update (:meth:`~vdtn_marl.algos.ppo.PPOTrainer.fit_critic`)."""
+        batches = self.cfg.control.pi_star_critic_warmup
+        if not batches:
+            return
+        what = f"π*'s critic on {batches} batches of its start policy"
+        with logged_stage("critic_warmup", what, self.position["iteration"]):
+            stats = self.pi_star.fit_critic(batches)
+        self.position["critic_warmup"] = {"batches": batches, **stats}
 
     def _fit_value(self) -> None:
         """``rra.value_fit=acting``: fit the td estimator's v* on the states the acting system
@@ -530,6 +551,53 @@ class JointOptimisation:
             )
             self.position["warm_start"]["memo"] = "stored"
 
+    def _score_reference(self, name: str, policy) -> torch.Tensor | None:
+        """Per-scenario returns of a reference comparator on perfect observations over the
+        evaluation scenarios, scored once per run and kept in the loop's position (so in its
+        checkpoints): :mod:`.reference`. None in a run without an ``evaluate`` stage."""
+        if "evaluate" not in self.stages:
+            return None
+        memo = self.reference_memo()
+
+        def score() -> torch.Tensor:
+            with torch.random.fork_rng(devices=[]):  # scoring leaves training's RNG alone
+                return perfect_returns(
+                    self.cfg, self.params, policy, trace_source=self.eval_traces,
+                    device=self.device,
+                )  # fmt: skip
+
+        return scored_once(memo, name, score)
+
+    def reference_memo(self) -> dict[str, Any]:
+        """The reference comparators scored so far on this run's evaluation scenarios."""
+        e, scenario = self.cfg.experiment, self.cfg.scenario
+        scenarios = {
+            "seed": self.cfg.seed, "episodes": e.eval_episodes, "intervals": e.eval_intervals,
+            "gamma": self.gamma, "scenario": scenario.name, "traces": scenario.traces,
+            "trace_path": scenario.trace_path, "eval_windows": scenario.eval_windows,
+        }  # fmt: skip
+        return scenarios_memo(self.position, scenarios)
+
+    def reference_row(self, optimal, acting) -> dict[str, Any]:
+        """The reference check's entries of an evaluation row (:mod:`.reference`): π*
+        against its start, the causal MPC, the CACC and the acting system."""
+        scored = self.reference_memo()
+        oracle_acts = self.cfg.control.name == "oracle"  # it knows the leader's future
+        comparators = {
+            # π*'s start is scored before its first update; a run without one (no PPO
+            # iterations, or resumed from a checkpoint written before the check) has none
+            "start": torch.tensor(scored["start"]) if "start" in scored else None,
+            "causal_mpc": self._score_reference(
+                "causal_mpc", make_control_baseline("causal_mpc", self.params)
+            ),
+            "cacc": self._score_reference("cacc", CACCController(self.params.platoon)),
+            "acting": None if acting is None or oracle_acts else acting.returns,
+        }
+        row = reference_check(optimal.returns, comparators)
+        if not row["reference_ok"]:
+            _log.warning("reference check failed: %s", row["reference_problems"])
+        return row
+
     def evaluate(self) -> dict[str, Any]:
         """The ``evaluate`` stage (:func:`.evaluate.evaluate_stage`): metrics of the acting
         system, EVoI against π*; the row is logged to ``evaluation.csv`` and returned."""
@@ -549,6 +617,7 @@ class JointOptimisation:
             video=self.cfg.video_scenarios if self.cfg.video else None,
         )
         self._last_results = (result.optimal, result.acting)
+        result.row.update(self.reference_row(result.optimal, result.acting))
         fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
         for stem, frames in result.frames.items():
             path = write_video(self.run_dir, frames, fps, self.cfg.video_format, stem=stem)

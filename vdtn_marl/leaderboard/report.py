@@ -20,6 +20,7 @@ from vdtn_marl.errors import LeaderboardError
 from vdtn_marl.experiment.compose import hydra_compose
 from vdtn_marl.experiment.config import BenchConfig
 from vdtn_marl.experiment.metrics import AOI_KEYS, METRICS
+from vdtn_marl.experiment.reference import REFERENCE_WARNING, row_problems
 from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
 from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan, with_submissions
 from vdtn_marl.leaderboard.plots import write_plots
@@ -188,6 +189,38 @@ def _iqm_omitted_line(by_method: Mapping[str, Mapping[str, Any]]) -> str | None:
     )
 
 
+def reference_failures(rows: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
+    """The runs that fail the reference check (:mod:`vdtn_marl.experiment.reference`): scenario,
+    method, seed and why."""
+    return [
+        {"scenario": r.get("scenario"), "method": r.get("method"), "seed": r.get("seed"),
+         "problems": problems}
+        for r in rows
+        if (problems := row_problems(r))
+    ]  # fmt: skip
+
+
+def _reference_lines(failures: Sequence[Mapping[str, Any]], n_runs: int) -> list[str]:
+    if not failures:
+        return [
+            f"- **reference check**: passed in all {n_runs} runs (π* on perfect observations is "
+            "no worse than its start, and not significantly worse than the causal MPC, the CACC "
+            "or the acting system)"
+        ]
+    lines = [
+        f"- **reference check FAILED in {len(failures)} of {n_runs} runs**: "
+        + REFERENCE_WARNING.rstrip(": ")
+        + "; their EVoI and IVoI are not measured against an optimum:",
+        "",
+        "| scenario | method | seed | problem |",
+        "|---|---|--:|---|",
+    ]
+    lines += [
+        f"| {f['scenario']} | {f['method']} | {f['seed']} | {f['problems']} |" for f in failures
+    ]
+    return lines + [""]
+
+
 def _markdown(
     cfg: BenchConfig,
     rows: Sequence[Mapping[str, Any]],
@@ -243,6 +276,7 @@ def _markdown(
         lines.append(
             f"- **incomplete**: {n_done} of {n_cells} runs are complete; {how} to finish the others"
         )
+    lines += _reference_lines(reference_failures(rows), len(rows))
     if target is not None:
         lines += ["", *target_markdown(target)]
     lines += [
@@ -456,6 +490,7 @@ def write_report(
             "statistics": stats,
             "paired_differences": paired,
             **({"target": target} if target is not None else {}),
+            "reference_failures": reference_failures(rows),
             "runs": rows,
         },
     )
