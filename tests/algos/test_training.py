@@ -26,6 +26,7 @@ from vdtn_marl.experiment.config import (
 )
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.io.files import read_csv_rows
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.layout import RRAFeatureLayout
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
@@ -601,3 +602,54 @@ def interrupt_and_resume(cfg, root: Path, monkeypatch, crash_at: int, reference)
     strip = [r.rsplit(",", 1)[0] for r in (root / "straight" / "metrics.csv").open()]
     assert strip == [r.rsplit(",", 1)[0] for r in (root / "resumed" / "metrics.csv").open()]
     return interrupted
+
+
+def test_fit_critic_learns_the_start_policys_returns_and_leaves_the_actor_alone():
+    """PPOTrainer.fit_critic: on a held-out batch of the start policy (the CACC prior) the
+    critic's mean error against its TD(λ) targets falls to a fraction, the targets' variance it
+    explains grows, and the actor, the iteration count and the stage stay as they were."""
+    algo = replace(TINY_ALGO, rollout_steps=100, minibatch_size=256)
+    env = VDTNTorchRLEnv("control", batch_size=8, seed=0)
+    trainer = PPOTrainer(
+        env, "vehicle", algo, seed=0, prior=CACCController(env.twin.params.platoon)
+    )
+    trainer.fit_observation_scaling()
+    held_out = trainer.collect(iteration=77)
+
+    def critic_error() -> tuple[float, float]:
+        data = held_out.clone()
+        with torch.no_grad():
+            trainer._value_targets(data)
+        error = data.get(trainer.loss.tensor_keys.value_target) - data.get(
+            ("vehicle", "state_value")
+        )
+        explained = 1.0 - float(error.var() / data.get(trainer.loss.tensor_keys.value_target).var())
+        return abs(float(error.mean())), explained
+
+    actor = [p.detach().clone() for p in trainer.actor.parameters()]
+    bias_before, explained_before = critic_error()
+    stats = trainer.fit_critic(10)
+    bias_after, explained_after = critic_error()
+    assert bias_after < 0.3 * bias_before and explained_after > explained_before
+    assert math.isfinite(stats["loss_critic"]) and math.isfinite(stats["explained_variance"])
+    assert all(torch.equal(a, b) for a, b in zip(trainer.actor.parameters(), actor, strict=True))
+    assert (trainer.iteration, trainer.stage) == (0, None)
+    with pytest.raises(ValueError, match="iterations"):
+        trainer.fit_critic(-1)
+
+
+def test_pi_star_has_its_own_validation_and_a_warmed_critic():
+    """control.pi_star_validate_every is π*'s algo.validate_every (the others keep theirs), and
+    control.pi_star_critic_warmup batches run before its first PPO update."""
+    cfg = tiny_config(
+        control=ControlConfig(warm_start="none", pi_star_validate_every=2, pi_star_critic_warmup=2)
+    )
+    loop = JointOptimisation(cfg, "unused", task="control")
+    assert loop.pi_star.algo.validate_every == 2 and loop.pi_tilde.algo.validate_every == 0
+    calls = []
+    loop.pi_star.fit_critic = lambda n: calls.append((n, loop.pi_star.iteration)) or {}
+    bar = type("Bar", (), {"update": lambda self, n: None, "set_postfix": lambda self, **kw: None})
+    loop._train_stage("control_perfect", bar())
+    assert calls == [(2, 0)]
+    assert loop.position["critic_warmup"] == {"batches": 2}
+    assert loop.position["selected_iterations"]["control_perfect"] >= -1

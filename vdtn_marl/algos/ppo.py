@@ -64,6 +64,10 @@ VALIDATION_ITERATION = SEED_STRIDE - 2
 SCALING_MID_EPISODE_ITERATION = SEED_STRIDE - 4  # -3: imitation's DISTILLATION_ITERATION
 
 
+#: fit_critic: the critic's own Adam step size, and its passes per batch in units of algo.epochs
+CRITIC_FIT_LR = 1e-3
+CRITIC_FIT_EPOCHS = 2
+
 #: The terms of the clipped loss that are optimised, and the diagnostics it returns beside them.
 LOSS_KEYS = ("loss_objective", "loss_critic", "loss_entropy")
 HEALTH_KEYS = ("kl_approx", "clip_fraction", "explained_variance")
@@ -276,11 +280,7 @@ class PPOTrainer:
 
     def _update(self, data: TensorDictBase) -> dict[str, float]:
         with torch.no_grad():
-            self.loss.value_estimator(
-                data,
-                params=self.loss.critic_network_params,
-                target_params=self.loss.target_critic_network_params,
-            )
+            self._value_targets(data)
             if self.active is not None:
                 self._mask_advantage(data)
         # minibatches gather only what the loss reads once GAE is done (not the next step's
@@ -308,39 +308,46 @@ class PPOTrainer:
 
     def fit_critic(self, iterations: int) -> dict[str, float]:
         """Fit the critic alone to the current actor's returns before the actor's first update
-        (a warm-started actor's advantages are then measured, not drawn from an untrained
-        critic): ``iterations`` batches collected as training collects them, on each the
-        TD(λ) targets of GAE with the current critic, then ``algo.epochs`` passes of shuffled
-        minibatches of the critic loss. The actor, the iteration count and the stage do not
-        change. Returns the last batch's mean critic loss and explained variance."""
+        (a warm-started actor's first advantages are then measured, not read off an untrained
+        critic whose values are far from the returns): ``iterations`` batches collected as
+        training collects them; on each, GAE's TD(λ) targets with the current critic, the
+        critic's output shifted by the mean target error (its values start near 0, the
+        returns of a whole horizon do not), then ``algo.epochs`` ×
+        :data:`CRITIC_FIT_EPOCHS` passes of shuffled minibatches of the critic loss with an
+        Adam of its own at :data:`CRITIC_FIT_LR`. The actor, PPO's optimiser, the iteration
+        count and the stage do not change. Returns the last batch's mean critic loss and
+        explained variance."""
         if isinstance(iterations, bool) or not isinstance(iterations, int) or iterations < 0:
             raise ValueError(f"critic fit iterations={iterations!r} must be an integer >= 0")
         if not self.scaling_fitted:
             self.fit_observation_scaling()
+        optimizer = torch.optim.Adam(self.critic.parameters(), lr=CRITIC_FIT_LR)
+        *_, output_bias = (p for n, p in self.critic.named_parameters() if n.endswith("bias"))
+        keys = self.loss.tensor_keys
         loss_sum = variance_sum = 0.0
         steps = 0
         for _ in range(iterations):
             data = self.collect()
             with torch.no_grad():
-                self.loss.value_estimator(
-                    data,
-                    params=self.loss.critic_network_params,
-                    target_params=self.loss.target_critic_network_params,
-                )
+                self._value_targets(data)
+                output_bias.add_((data.get(keys.value_target) - data.get(keys.value)).mean())
+                self._value_targets(data)
             flat = data.reshape(-1).select(*self._minibatch_keys(), strict=False)
             n = flat.shape[0]
             size = min(self.algo.minibatch_size, n)
             loss_sum = variance_sum = 0.0  # the last batch's
             steps = 0
-            for _ in range(self.algo.epochs):
+            for _ in range(self.algo.epochs * CRITIC_FIT_EPOCHS):
                 order = torch.randperm(n, device=self.device)
                 for start in range(0, n - size + 1, size):
                     loss, _, explained = self.loss.loss_critic(flat[order[start : start + size]])
                     loss = loss.mean()
-                    self.optimizer.zero_grad(set_to_none=True)
+                    optimizer.zero_grad(set_to_none=True)
                     loss.backward()
-                    torch.nn.utils.clip_grad_norm_(self.loss.parameters(), self.algo.max_grad_norm)
-                    self.optimizer.step()
+                    torch.nn.utils.clip_grad_norm_(
+                        self.critic.parameters(), self.algo.max_grad_norm
+                    )
+                    optimizer.step()
                     loss_sum += float(loss.detach())
                     variance_sum += math.nan if explained is None else float(explained.mean())
                     steps += 1
@@ -348,6 +355,14 @@ class PPOTrainer:
             "loss_critic": loss_sum / steps if steps else math.nan,
             "explained_variance": variance_sum / steps if steps else math.nan,
         }
+
+    def _value_targets(self, data: TensorDictBase) -> None:
+        """GAE's advantage and value target into ``data``, with the current critic."""
+        self.loss.value_estimator(
+            data,
+            params=self.loss.critic_network_params,
+            target_params=self.loss.target_critic_network_params,
+        )
 
     def _minibatch_keys(self) -> list:
         """The keys the clipped loss reads from a minibatch: its inputs at the current step
