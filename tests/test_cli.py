@@ -216,6 +216,10 @@ BAD_CONFIGS = [
     (["algo.num_envs=2.5"], "algo.num_envs=2.5"),
     (["task=nope"], "task='nope'"),
     (["control.warm_start=teacher"], "control.warm_start='teacher'"),
+    (["control.pi_star_critic_warmup=-1"], "control.pi_star_critic_warmup=-1"),
+    (["control.pi_star_validate_every=-2"], "control.pi_star_validate_every=-2"),
+    (["rra.warm_start=random"], "rra.warm_start='random'"),
+    (["rra.validate_every=-1"], "rra.validate_every=-1"),
     (["control=oracle", "control.mpc_iterations=0"], "control.mpc_iterations=0"),
     (["control.mpc_iterations=50"], "control.mpc_iterations=50"),  # control=learned
     (["algo.validation_scenarios=0"], "algo.validation_scenarios=0"),

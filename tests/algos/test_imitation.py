@@ -157,3 +157,52 @@ def test_jocc_warm_start_imitates_the_causal_mpc_before_the_first_pi_star_stage(
     cold_control = ControlConfig(warm_start="none")
     cold = JointOptimisation(replace(cfg, control=cold_control), tmp_path / "cold", "control")
     assert cold.run()["warm_start"] is None and calls == []
+
+
+# ------------------------------------------------------------------------------ RRA agents
+def _rra_trainer(seed: int = 0) -> PPOTrainer:
+    env = VDTNTorchRLEnv(
+        "rra", batch_size=4, seed=seed, episode_intervals=40,
+        control_module=CACCController(PARAMS.platoon), reward="jocc",
+    )  # fmt: skip
+    return PPOTrainer(env, "rra", ALGO, seed=seed, rollout_steps=50)
+
+
+def test_rra_agents_learn_to_act_as_the_opportunistic_baseline():
+    """distill_rra_teacher: the student's deterministic action is the teacher's on most of the
+    (link, subframe) pairs with a CAM pending, and on the held-out twin it delivers CAMs and
+    carries V2I as the teacher does."""
+    from vdtn_marl.algos.evaluate import evaluate_system
+    from vdtn_marl.algos.imitation import distill_rra_teacher
+    from vdtn_marl.algos.ppo import ActorPolicy
+    from vdtn_marl.policies import make_rra_baseline
+
+    trainer = _rra_trainer()
+    cacc = CACCController(PARAMS.platoon)
+    untrained = ActorPolicy(trainer.actor, "rra")
+    common = dict(perfect=False, episodes=8, intervals=40, seed=123)
+    before = evaluate_system(PARAMS, cacc, untrained, **common).metrics
+    stats = distill_rra_teacher(
+        trainer, make_rra_baseline("opportunistic", PARAMS), PARAMS, cacc,
+        rounds=2, scenarios=8, intervals=20, fit_steps=600,
+    )  # fmt: skip
+    assert stats.rounds == 2 and stats.samples > 0 and stats.agreement > 0.8
+    student = evaluate_system(PARAMS, cacc, ActorPolicy(trainer.actor, "rra"), **common).metrics
+    teacher = evaluate_system(
+        PARAMS, cacc, make_rra_baseline("opportunistic", PARAMS), **common
+    ).metrics
+    assert before["cam_delivery_rate"] < 0.5  # the untrained policy delivers few CAMs
+    assert student["cam_delivery_rate"] >= teacher["cam_delivery_rate"] - 0.05
+    rel = student["v2i_throughput_mbps_per_link"] / teacher["v2i_throughput_mbps_per_link"]
+    assert abs(rel - 1.0) < 0.03
+
+
+def test_rra_distillation_refuses_the_vehicle_group_and_bad_sizes():
+    from vdtn_marl.algos.imitation import distill_rra_teacher
+    from vdtn_marl.policies import make_rra_baseline
+
+    teacher, cacc = make_rra_baseline("greedy", PARAMS), CACCController(PARAMS.platoon)
+    with pytest.raises(ValueError, match="'rra' group"):
+        distill_rra_teacher(make_trainer(), teacher, PARAMS, cacc)
+    with pytest.raises(ValueError, match="intervals"):
+        distill_rra_teacher(_rra_trainer(), teacher, PARAMS, cacc, intervals=41)

@@ -34,6 +34,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import torch
+from tensordict import TensorDict
 
 from vdtn_marl.algos.ppo import SEED_STRIDE, ActorPolicy, PPOTrainer
 from vdtn_marl.core.interval import IntervalEngine
@@ -176,5 +177,152 @@ def distill_teacher(
         rounds=rounds,
         samples=int(data_y.numel()),
         rms_error_mps2=rms,
+        seconds=time.perf_counter() - began,
+    )
+
+
+#: ``seed_for`` offset of the first RRA distillation round's scenarios (later rounds count down
+#: from it): apart from the vehicle distillation's and every training batch's.
+RRA_DISTILLATION_ITERATION = SEED_STRIDE - 3 - MAX_ROUNDS
+
+
+class _LabelledRadio:
+    """An RRA policy for :meth:`IntervalEngine.run_radio` that asks the ``teacher`` for its
+    actions in every subframe (a stateful teacher sees every observation), keeps the subframes
+    in which some link has a CAM pending, and acts with the ``driver`` (the teacher itself when
+    None)."""
+
+    def __init__(self, teacher, driver, bits_left: int):
+        self.teacher, self.driver, self.bits_left = teacher, driver, bits_left
+        self.observations: list[torch.Tensor] = []
+        self.labels: list[torch.Tensor] = []
+        self.pending: list[torch.Tensor] = []
+
+    def __call__(self, observation: torch.Tensor) -> torch.Tensor:
+        label = torch.as_tensor(self.teacher(observation), device=observation.device).long()
+        pending = observation[..., self.bits_left] > 0  # [B, L]: the action has an effect
+        rows = pending.any(-1)
+        if bool(rows.any()):
+            self.observations.append(observation[rows].clone())
+            self.labels.append(label[rows])
+            self.pending.append(pending[rows])
+        return label if self.driver is None else self.driver(observation)
+
+
+@dataclass
+class RRADistillationStats:
+    """What an RRA warm start did."""
+
+    rounds: int
+    samples: int  # (link, subframe) pairs with a CAM pending
+    agreement: float  # share of them on which the student's action is the teacher's
+    seconds: float
+
+
+def distill_rra_teacher(
+    trainer: PPOTrainer,
+    teacher: Callable[[torch.Tensor], torch.Tensor],
+    params: TwinParams,
+    control: Callable[[torch.Tensor], torch.Tensor],
+    *,
+    rounds: int = 3,
+    scenarios: int = 16,
+    intervals: int = 40,
+    fit_steps: int = 1500,
+    minibatch_size: int = 1024,
+    lr: float = 1e-3,
+    trace_source=None,
+    completion=None,
+    progress: Callable[[int], None] | None = None,
+) -> RRADistillationStats:
+    """Fit ``trainer``'s RRA actor (a Categorical over sub-channel × power) to an RRA
+    ``teacher`` (RRA observations [B, L, D] → actions [B, L], e.g. the opportunistic
+    baseline), DAgger as :func:`distill_teacher` does for the vehicles: round 0 runs the radio
+    with the teacher, later rounds with the student's deterministic action; the teacher labels
+    every subframe and the actor's logits are fitted to its actions by cross-entropy over the
+    (link, subframe) pairs with a CAM pending (elsewhere the action has no effect). The
+    followers act with ``control`` (the acting control module, on impaired observations, with
+    ``completion``); ``scenarios`` of ``intervals`` control intervals per round, seeded with
+    ``trainer.seed_for(RRA_DISTILLATION_ITERATION − r)``. The teacher's ``reset()``, if any,
+    is called at every round's start. ``progress`` is called with 1 after every interval and
+    every 100 fit steps."""
+    if trainer.group != "rra":
+        raise ValueError(f"RRA distillation trains the 'rra' group, not {trainer.group!r}")
+    _check("rounds", rounds, 1)
+    if rounds > MAX_ROUNDS:
+        raise ValueError(f"rounds={rounds!r} must be <= {MAX_ROUNDS}")
+    _check("scenarios", scenarios, 1)
+    _check("intervals", intervals, 1)
+    _check("fit_steps", fit_steps, 0)
+    _check("minibatch_size", minibatch_size, 1)
+    if intervals > params.episode_intervals:
+        raise ValueError(
+            f"intervals={intervals} must be <= the model's episode_intervals="
+            f"{params.episode_intervals}"
+        )
+    if not lr > 0:
+        raise ValueError(f"lr={lr!r} must be > 0")
+    began = time.perf_counter()
+    tick = progress or (lambda n: None)
+    if not trainer.scaling_fitted:
+        trainer.fit_observation_scaling()
+    device = trainer.device
+    student = ActorPolicy(trainer.actor, "rra")
+    logits_of = trainer.actor.module[0]  # the TensorDictModule writing (rra, logits)
+    generator = torch.Generator(device=device).manual_seed(trainer.seed)
+    optimizer = torch.optim.Adam(trainer.actor.parameters(), lr=lr)
+    observations: list[torch.Tensor] = []
+    labels: list[torch.Tensor] = []
+    pending: list[torch.Tensor] = []
+
+    def logits(x: torch.Tensor) -> torch.Tensor:
+        td = TensorDict({("rra", "observation"): x}, batch_size=x.shape[:-2], device=device)
+        return logits_of(td).get(("rra", "logits"))
+
+    for r in range(rounds):
+        seed = trainer.seed_for(RRA_DISTILLATION_ITERATION - r)
+        twin = DigitalTwin(
+            params, batch_size=scenarios, device=device, seed=seed, radio=True,
+            trace_source=trace_source, backend="torch",
+        )  # fmt: skip
+        twin.reset(seed=seed)
+        if hasattr(teacher, "reset"):
+            teacher.reset()
+        if completion is not None:
+            completion.reset()
+        radio = _LabelledRadio(teacher, None if r == 0 else student, twin.rra_layout.bits_left)
+        engine = IntervalEngine(
+            twin, perfect=False, rra_policy=radio, control=control, completion=completion
+        )
+        engine.run_radio()
+        for k in range(intervals):
+            if k > 0:
+                engine.advance()
+            engine.close()
+            tick(1)
+        observations += radio.observations
+        labels += radio.labels
+        pending += radio.pending
+        data_x, data_y, data_m = torch.cat(observations), torch.cat(labels), torch.cat(pending)
+        for step in range(fit_steps):
+            index = torch.randint(
+                0, data_x.shape[0], (min(minibatch_size, data_x.shape[0]),),
+                generator=generator, device=device,
+            )  # fmt: skip
+            mask = data_m[index]
+            loss = torch.nn.functional.cross_entropy(
+                logits(data_x[index])[mask], data_y[index][mask]
+            )
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            optimizer.step()
+            if (step + 1) % 100 == 0:
+                tick(1)
+    with torch.no_grad():
+        agreement = float((student(data_x) == data_y)[data_m].double().mean())
+    return RRADistillationStats(
+        rounds=rounds,
+        samples=int(data_m.sum()),
+        agreement=agreement,
         seconds=time.perf_counter() - began,
     )

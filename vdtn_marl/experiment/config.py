@@ -42,6 +42,8 @@ LR_SCHEDULES = ("constant", "linear")
 TASKS = ("control", "control_impaired", "rra")
 COMPLETIONS = ("none", "hold", "kalman", "learned")
 WARM_STARTS = ("none", "causal_mpc")
+#: rra.warm_start: none, or an RRA baseline the learned RRA agents imitate before PPO
+RRA_WARM_STARTS = ("none", *(name for name in RRA_BASELINES if name != "random"))
 
 
 @dataclass
@@ -145,6 +147,14 @@ class RRAConfig:
     # rra=policy: the user's RRA policy (no RRA agents are trained): module:factory,
     # file.py:factory, or a TorchRL/BenchMARL checkpoint (.pt)
     policy: str | None = None
+    # learned RRA: before their first PPO update the RRA agents imitate this baseline (DAgger,
+    # vdtn_marl.algos.imitation.distill_rra_teacher; e.g. opportunistic), as π* imitates the
+    # causal MPC; none: PPO from the untrained policy
+    warm_start: str = "none"
+    # algo.validate_every for the RRA agents: every N PPO iterations their deterministic
+    # policy is scored on fixed validation scenarios and the best is kept, the stage's start
+    # a candidate (with a warm start: PPO must beat the imitated policy); 0: the last iterate
+    validate_every: int = 0
 
     @property
     def learned(self) -> bool:
@@ -276,6 +286,8 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("rra.name", r.name, RRA_METHODS)
     _check_user_policies(c, r)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
+    _choice("rra.warm_start", r.warm_start, RRA_WARM_STARTS)
+    _positive_int("rra.validate_every", r.validate_every, low=0)
     _choice("rra.value_fit", r.value_fit, VALUE_FITS)
     _positive_int("rra.value_fit_horizon", r.value_fit_horizon, high=100_000)
     if r.value_fit != "none" and r.ivoi_estimator != "td":

@@ -245,6 +245,8 @@ def run_summary(
         "warm_start": position.get("warm_start"),
         # control.pi_star_critic_warmup: π*'s critic fitted before its first update
         "critic_warmup": position.get("critic_warmup"),
+        # rra.warm_start: the RRA agents' imitation of a baseline
+        "rra_warm_start": position.get("rra_warm_start"),
         # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
         "value_fit": position.get("value_fit"),
         "seconds": seconds,

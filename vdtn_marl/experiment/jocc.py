@@ -47,7 +47,7 @@ from typing import Any
 import torch
 
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
-from vdtn_marl.algos.imitation import distill_teacher, distillation_ticks
+from vdtn_marl.algos.imitation import distill_rra_teacher, distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
 from vdtn_marl.algos.trainer import Trainer, trainer_class
@@ -264,7 +264,7 @@ class JointOptimisation:
             self.rra = make_trainer(
                 rra_env,
                 "rra",
-                algo,
+                dataclasses.replace(algo, validate_every=rra.validate_every),
                 seed=cfg.seed * 8 + 2,
                 rollout_steps=algo.rra_rollout_steps,
                 gamma=gamma,
@@ -443,6 +443,8 @@ class JointOptimisation:
                 self._fit_pi_star_critic()
             if stage == "rra" and self.v_fit is not None:
                 self._fit_value()
+            if stage == "rra" and trainer.iteration == 0:
+                self._warm_start_rra()
             self.position["stage_start"] = trainer.iteration
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
@@ -475,6 +477,23 @@ class JointOptimisation:
         with logged_stage("critic_warmup", what, self.position["iteration"]):
             stats = self.pi_star.fit_critic(batches)
         self.position["critic_warmup"] = {"batches": batches, **stats}
+
+    def _warm_start_rra(self) -> None:
+        """``rra.warm_start=<baseline>``: the RRA agents imitate the baseline before their first
+        PPO stage, the acting control driving the followers
+        (:func:`~vdtn_marl.algos.imitation.distill_rra_teacher`, on the training traces)."""
+        cfg = self.cfg
+        if cfg.rra.warm_start == "none":
+            return
+        teacher = make_rra_baseline(cfg.rra.warm_start, self.params, cfg.seed)
+        what = f"the RRA agents imitating rra={cfg.rra.warm_start}"
+        with logged_stage("rra_warm_start", what, self.position["iteration"]):
+            stats = distill_rra_teacher(
+                self.rra, teacher, self.params, self.control_policy(),
+                trace_source=self.train_traces, completion=self.completion,
+                progress=lambda n: check_interrupt(),
+            )  # fmt: skip
+        self.position["rra_warm_start"] = {"teacher": cfg.rra.warm_start, **asdict(stats)}
 
     def _fit_value(self) -> None:
         """``rra.value_fit=acting``: fit the td estimator's v* on the states the acting system
