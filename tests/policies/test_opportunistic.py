@@ -1,4 +1,5 @@
-"""The deadline-aware opportunistic RRA policy: when it sends, and what it gives on the twin."""
+"""The deadline-aware opportunistic RRA policy (when it sends, what it gives on the twin) and the
+silent one."""
 
 from __future__ import annotations
 
@@ -92,3 +93,17 @@ def test_it_delivers_like_greedy_and_carries_more_v2i_under_cacc():
     assert waits["gap_error_abs_m"] <= 1.02 * greedy["gap_error_abs_m"]
     assert waits["v2i_throughput_mbps_per_link"] >= 1.03 * greedy["v2i_throughput_mbps_per_link"]
     assert waits["cam_latency_ms_mean"] > greedy["cam_latency_ms_mean"]  # it waits
+
+
+def test_silent_never_transmits_and_leaves_the_v2i_uplinks_their_clean_rate():
+    params = TwinParams()
+    common = dict(perfect=False, episodes=4, intervals=20, seed=3)
+    cacc = make_control_baseline("cacc", params)
+    silent = evaluate_system(params, cacc, make_rra_baseline("silent", params), **common).metrics
+    greedy = evaluate_system(params, cacc, make_rra_baseline("greedy", params), **common).metrics
+    assert silent["cam_delivery_rate"] == 0.0
+    assert silent["v2i_throughput_mbps_per_link"] > 1.2 * greedy["v2i_throughput_mbps_per_link"]
+    actions = make_rra_baseline("silent", params)(np.zeros((2, 3, LAYOUT.dim), np.float32))
+    assert actions.dtype == np.int64 and bool(
+        (DECODE.power_mw[torch.as_tensor(actions)] == 0).all()
+    )

@@ -43,7 +43,7 @@ TASKS = ("control", "control_impaired", "rra")
 COMPLETIONS = ("none", "hold", "kalman", "learned")
 WARM_STARTS = ("none", "causal_mpc")
 #: rra.warm_start: none, or an RRA baseline the learned RRA agents imitate before PPO
-RRA_WARM_STARTS = ("none", *(name for name in RRA_BASELINES if name != "random"))
+RRA_WARM_STARTS = ("none", *(name for name in RRA_BASELINES if name not in ("random", "silent")))
 
 
 @dataclass

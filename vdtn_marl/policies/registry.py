@@ -35,6 +35,7 @@ RRA_BASELINES: dict[str, str] = {
     "round_robin": "vdtn_marl.policies.rra:RoundRobinRRAPolicy",
     "greedy": "vdtn_marl.policies.rra:GreedyRRAPolicy",
     "opportunistic": "vdtn_marl.policies.opportunistic:OpportunisticRRAPolicy",
+    "silent": "vdtn_marl.policies.rra:SilentRRAPolicy",
 }
 
 

@@ -1,5 +1,5 @@
-"""Radio resource allocation (RRA) heuristics: random (the environments' default), round robin
-and greedy (best estimated SINR).
+"""Radio resource allocation (RRA) heuristics: random (the environments' default), round robin,
+greedy (best estimated SINR) and silent (no V2V transmission: the throughput-only extreme).
 
 They map RRA observations ``[..., L, D]`` (NumPy or torch, docs/model.md §4.6) to integer
 actions ``[..., L]`` of the same kind. Action encoding (``vdtn_marl.sim.link.ActionTables``):
@@ -221,3 +221,35 @@ class GreedyRRAPolicy:
         best = self.scores_db(observation).argmax(-1)
         actions = encode_rra_action(best, self.power_level, self.num_power_levels)
         return actions.astype(np.int64) if isinstance(actions, np.ndarray) else actions.long()
+
+
+class SilentRRAPolicy:
+    """Every V2V link stays silent (the "off" power level on sub-channel 0): no CAM is ever
+    delivered and the V2I uplinks carry their interference-free rate. The throughput-only
+    extreme of the RRA objective, against which a policy's V2I gain and its CAMs' value are
+    measured. Observations ``[..., L, D]`` (NumPy or torch) → int64 actions ``[..., L]``."""
+
+    def __init__(self, num_links: int, num_power_levels: int):
+        for name, value in (("num_links", num_links), ("num_power_levels", num_power_levels)):
+            if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < 1:
+                raise ValueError(f"{name}={value!r} must be an integer >= 1")
+        self.num_links = int(num_links)
+        self.off_action = encode_rra_action(0, int(num_power_levels) - 1, int(num_power_levels))
+
+    @classmethod
+    def from_params(cls, params: TwinParams, seed: int | None = None) -> SilentRRAPolicy:
+        """One link per follower (``seed`` unused: deterministic)."""
+        return cls(params.platoon.num_followers, params.radio.num_power_levels)
+
+    def seed(self, seed: int | None) -> None:
+        """Deterministic policy: nothing to seed (API symmetry)."""
+
+    def reset(self) -> None:
+        """Stateless policy: nothing to reset (API symmetry)."""
+
+    def __call__(self, observation):
+        _check_links(observation, self.num_links)
+        shape = observation.shape[:-1]
+        if isinstance(observation, np.ndarray):
+            return np.full(shape, self.off_action, dtype=np.int64)
+        return torch.full(shape, self.off_action, dtype=torch.long, device=observation.device)
