@@ -638,13 +638,13 @@ def test_fit_critic_learns_the_start_policys_returns_and_leaves_the_actor_alone(
         trainer.fit_critic(-1)
 
 
-def test_pi_star_has_its_own_validation_and_a_warmed_critic():
+def test_pi_star_has_its_own_validation_and_a_warmed_critic(tmp_path):
     """control.pi_star_validate_every is π*'s algo.validate_every (the others keep theirs), and
     control.pi_star_critic_warmup batches run before its first PPO update."""
     cfg = tiny_config(
         control=ControlConfig(warm_start="none", pi_star_validate_every=2, pi_star_critic_warmup=2)
     )
-    loop = JointOptimisation(cfg, "unused", task="control")
+    loop = JointOptimisation(cfg, tmp_path, task="control")
     assert loop.pi_star.algo.validate_every == 2 and loop.pi_tilde.algo.validate_every == 0
     calls = []
     loop.pi_star.fit_critic = lambda n: calls.append((n, loop.pi_star.iteration)) or {}
