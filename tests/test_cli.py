@@ -220,6 +220,8 @@ BAD_CONFIGS = [
     (["control.pi_star_validate_every=-2"], "control.pi_star_validate_every=-2"),
     (["rra.warm_start=random"], "rra.warm_start='random'"),
     (["rra.validate_every=-1"], "rra.validate_every=-1"),
+    (["rra.term_scales=auto"], "rra.term_scales='auto'"),
+    (["rra=drra", "rra.term_scales=spread"], "rra.term_scales='spread'"),
     (["control=oracle", "control.mpc_iterations=0"], "control.mpc_iterations=0"),
     (["control.mpc_iterations=50"], "control.mpc_iterations=50"),  # control=learned
     (["algo.validation_scenarios=0"], "algo.validation_scenarios=0"),

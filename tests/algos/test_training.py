@@ -653,3 +653,38 @@ def test_pi_star_has_its_own_validation_and_a_warmed_critic(tmp_path):
     assert calls == [(2, 0)]
     assert loop.position["critic_warmup"] == {"batches": 2}
     assert loop.position["selected_iterations"]["control_perfect"] >= -1
+
+
+def test_spread_term_scales_pay_the_rra_agents_and_survive_a_resume(tmp_path, monkeypatch):
+    """rra.term_scales=spread: the scales measured before an RRA stage (here from stand-in
+    measurements of the silent and the greedy policy) are the RRA environment's reward's,
+    recorded in the position, and put back after a resume."""
+    from types import SimpleNamespace
+
+    from vdtn_marl.experiment import jocc
+    from vdtn_marl.experiment.config import RRAConfig
+
+    measured = {"SilentRRAPolicy": (2.5, -0.02), "GreedyRRAPolicy": (2.0, -0.01)}
+
+    def stand_in(params, control, rra, **kw):
+        v2i, xi = measured[type(rra).__name__]
+        return SimpleNamespace(metrics={"v2i_throughput_mbps_per_link": v2i, "ivoi_mean": xi})
+
+    monkeypatch.setattr(jocc, "evaluate_system", stand_in)
+    cfg = tiny_config(rra=RRAConfig(term_scales="spread"))
+    loop = JointOptimisation(cfg, tmp_path, task="jocc")
+    loop._scale_rra_terms()
+    (entry,) = loop.position["term_scales"]
+    reward = loop.rra.env.reward_fn
+    assert (reward.throughput_scale, reward.ivoi_scale) == (
+        entry["throughput_scale"],
+        entry["ivoi_scale"],
+    )
+    # 4 V2I uplinks × 50 subframes × 0.5 Mbps of spread, and 0.01 of ξ
+    assert entry["throughput_scale"] == pytest.approx(1 / 100.0)
+    assert entry["ivoi_scale"] == pytest.approx(1 / 0.01)
+    fresh = JointOptimisation(cfg, tmp_path / "other", task="jocc")
+    assert fresh.rra.env.reward_fn.throughput_scale == RRAConfig().throughput_scale
+    fresh.position["term_scales"] = loop.position["term_scales"]
+    fresh._apply_term_scales()
+    assert fresh.rra.env.reward_fn == reward

@@ -106,3 +106,24 @@ def test_numpy_throughput_term_is_the_general_formulas_bit_for_bit(scale):
     want = (reward_fn.kappa1 * reward_fn.throughput_scale) * want_g[:, None] * np.ones_like(bits)
     for got, expected in ((g, want_g), (reward, want)):
         assert got.dtype == expected.dtype and got.tobytes() == expected.tobytes()
+
+
+def test_spread_scales_make_each_terms_spread_one_by_hand():
+    from vdtn_marl.core.reward import spread_scales
+
+    # silent carries 500 Mbps·subframes per interval, greedy 400; ξ −0.02 against −0.015
+    s_g, s_xi = spread_scales((500.0, 400.0), (-0.02, -0.015))
+    assert s_g == pytest.approx(1 / 100) and s_xi == pytest.approx(1 / 0.005)
+    # κ1 = κ2 = 0.5 ranks the two extremes equal: 0.5·s_g·ΔG = 0.5·s_ξ·ΔΞ
+    assert 0.5 * s_g * 100.0 == pytest.approx(0.5 * s_xi * 0.005)
+
+
+@pytest.mark.parametrize(
+    ("throughput", "ivoi", "key"),
+    [((400.0, 400.0), (-0.02, -0.01), "V2I spread"), ((500.0, 400.0), (-0.01, -0.02), "IVoI")],
+)
+def test_spread_scales_refuse_a_spread_that_is_not_positive(throughput, ivoi, key):
+    from vdtn_marl.core.reward import spread_scales
+
+    with pytest.raises(ConfigError, match=key):
+        spread_scales(throughput, ivoi)

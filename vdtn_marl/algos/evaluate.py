@@ -73,6 +73,7 @@ METRIC_DOC = {
     "ivoi_mean_delivered": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was "
     "delivered within its interval",
     "ivoi_mean_lost": "mean IVoI ξ (unscaled) of the follower-intervals whose CAM was not",
+    "ivoi_mean": "mean IVoI ξ (unscaled) over the live follower-intervals",
     "ivoi_std": "standard deviation of IVoI ξ (unscaled) over the live follower-intervals: the "
     "noise a delivered − lost difference is learned against",
 }
@@ -246,6 +247,7 @@ def evaluate_system(
         "collision_rate": float((~alive).double().mean()),
     }
     if ivoi_estimator is not None:
+        metrics["ivoi_mean"] = xi_all.pooled()
         metrics["ivoi_std"] = xi_all.pooled_std()
     latency = torch.cat(latencies) if latencies else torch.zeros(0, dtype=torch.float64)
     if radio:

@@ -76,6 +76,43 @@ def _float32(value: float, array: np.ndarray):
 _FLOAT32: dict[tuple[float, float], np.ndarray] = {}
 
 
+#: ``rra.term_scales``: ``fixed`` (s_g, s_ξ as configured: the paper's reading with constant
+#: scales) or ``spread`` (each term divided by its spread between the throughput-only and the
+#: delivery-first RRA policies, :func:`spread_scales`)
+TERM_SCALES = ("fixed", "spread")
+
+
+def spread_scales(
+    interval_throughput_mbps: tuple[float, float], ivoi: tuple[float, float]
+) -> tuple[float, float]:
+    """(s_g, s_ξ) that give κ its stated meaning: each term of the ``jocc`` reward scaled by its
+    spread between the throughput-only policy (no V2V transmission) and the delivery-first
+    one (greedy), measured under the same acting system.
+
+    ``interval_throughput_mbps`` = (silent, greedy): the mean over intervals of Σ_t g_t, the
+    subframes' summed V2I rates (Mbps) of one interval; ``ivoi`` = (silent, greedy): the mean
+    ξ per follower-interval. Then s_g = 1 / (G_silent − G_greedy) and s_ξ = 1 / (Ξ_greedy −
+    Ξ_silent): a policy's per-interval reward is κ1 times the share of the throughput spread it
+    keeps plus κ2 times the share of the IVoI spread it keeps (up to a constant), so that
+    κ1 = κ2 = 0.5 ranks the two extremes equal. Raises :class:`ConfigError` where a spread is
+    not positive (delivering CAMs carries more V2I, or is worth less than losing them: no
+    trade-off to weigh)."""
+    g_silent, g_greedy = (float(x) for x in interval_throughput_mbps)
+    xi_silent, xi_greedy = (float(x) for x in ivoi)
+    throughput_spread, ivoi_spread = g_silent - g_greedy, xi_greedy - xi_silent
+    if not (math.isfinite(throughput_spread) and throughput_spread > 0):
+        raise ConfigError(
+            f"rra.term_scales=spread: the V2I spread G_silent − G_greedy = {throughput_spread!r} "
+            "Mbps per interval must be > 0"
+        )
+    if not (math.isfinite(ivoi_spread) and ivoi_spread > 0):
+        raise ConfigError(
+            f"rra.term_scales=spread: the IVoI spread Ξ_greedy − Ξ_silent = {ivoi_spread!r} must "
+            "be > 0 (the estimator values delivered CAMs no more than lost ones)"
+        )
+    return 1.0 / throughput_spread, 1.0 / ivoi_spread
+
+
 @dataclass(frozen=True)
 class RRAReward:
     kind: str = "jocc"

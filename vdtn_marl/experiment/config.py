@@ -17,7 +17,7 @@ from typing import Any
 
 from vdtn_marl.algos.params import ACTIVATIONS, MAX_COLLECTOR_WORKERS, AlgoConfig
 from vdtn_marl.algos.trainer import ALGORITHMS
-from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, RRAReward
+from vdtn_marl.core.reward import KAPPA_SUM_ABS_TOL, REWARD_KINDS, TERM_SCALES, RRAReward
 from vdtn_marl.errors import ConfigError
 from vdtn_marl.io.loggers import DEFAULT_LOGGERS, check_loggers
 from vdtn_marl.io.video import VIDEO_FORMATS, VIDEO_SCENARIOS, check_video
@@ -142,6 +142,10 @@ class RRAConfig:
     value_fit_horizon: int = 100  # value_fit=acting: intervals of π* per target, then its critic
     throughput_scale: float = RRAReward.throughput_scale  # reward units per Mbps of summed V2I rate
     ivoi_scale: float = RRAReward.ivoi_scale  # multiplies ξ before κ2
+    # jocc reward: "fixed" uses throughput_scale and ivoi_scale as given (the paper's reading);
+    # "spread" sets both before each RRA stage so that each term's spread between the silent
+    # and the greedy RRA policy, under the acting system, is 1 (vdtn_marl.core.reward)
+    term_scales: str = "fixed"
     miss_penalty: float = RRAReward.miss_penalty  # drra: penalty of a CAM that misses its interval
     aoi_scale: float = RRAReward.aoi_scale  # aoi: reward units per ms of Age of Information
     # rra=policy: the user's RRA policy (no RRA agents are trained): module:factory,
@@ -287,6 +291,12 @@ def validate(cfg: RunConfig) -> RunConfig:
     _check_user_policies(c, r)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
     _choice("rra.warm_start", r.warm_start, RRA_WARM_STARTS)
+    _choice("rra.term_scales", r.term_scales, TERM_SCALES)
+    if r.term_scales != "fixed" and r.name != "jocc":
+        raise ConfigError(
+            f"rra.term_scales={r.term_scales!r} scales the jocc reward's two terms; it needs "
+            f"rra=jocc, not rra={r.name!r} (allowed here: rra.term_scales=fixed)"
+        )
     _positive_int("rra.validate_every", r.validate_every, low=0)
     _choice("rra.value_fit", r.value_fit, VALUE_FITS)
     _positive_int("rra.value_fit_horizon", r.value_fit_horizon, high=100_000)

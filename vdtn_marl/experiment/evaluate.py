@@ -247,6 +247,8 @@ def run_summary(
         "critic_warmup": position.get("critic_warmup"),
         # rra.warm_start: the RRA agents' imitation of a baseline
         "rra_warm_start": position.get("rra_warm_start"),
+        # rra.term_scales=spread: the jocc reward's scales set before each RRA stage
+        "term_scales": position.get("term_scales"),
         # rra.value_fit=acting: each fit of v* (MSE of π*'s critic and of the fitted copy)
         "value_fit": position.get("value_fit"),
         "seconds": seconds,

@@ -47,12 +47,13 @@ from typing import Any
 import torch
 
 from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
+from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.imitation import distill_rra_teacher, distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
 from vdtn_marl.algos.ppo import ActorPolicy, CriticValue
 from vdtn_marl.algos.trainer import Trainer, trainer_class
 from vdtn_marl.algos.value_fit import fit_value_on_acting_states
-from vdtn_marl.core.reward import RRAReward
+from vdtn_marl.core.reward import RRAReward, spread_scales
 from vdtn_marl.data.selection import preprocessing_note
 from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.envs.torchrl import VDTNTorchRLEnv
@@ -99,6 +100,11 @@ TASK_STAGES = {
 }
 _log = logging.getLogger(__name__)
 
+#: rra.term_scales=spread: scenarios and intervals per RRA policy whose terms are measured, and
+#: the seed offset of those scenarios (apart from training's, evaluation's and the value fit's)
+SCALE_SCENARIOS = 16
+SCALE_INTERVALS = 100
+SCALE_SEED_OFFSET = 1_500_000_000
 #: rra.value_fit=acting: scenarios per RRA policy whose states v* is fitted on, and the seed
 #: offset of those scenarios (apart from training's and evaluation's)
 VALUE_FIT_SCENARIOS = 32
@@ -445,6 +451,8 @@ class JointOptimisation:
                 self._fit_value()
             if stage == "rra" and trainer.iteration == 0:
                 self._warm_start_rra()
+            if stage == "rra" and self.cfg.rra.term_scales == "spread":
+                self._scale_rra_terms()
             self.position["stage_start"] = trainer.iteration
             trainer.begin_stage(budget)
         end = self.position["stage_start"] + budget
@@ -494,6 +502,62 @@ class JointOptimisation:
                 progress=lambda n: check_interrupt(),
             )  # fmt: skip
         self.position["rra_warm_start"] = {"teacher": cfg.rra.warm_start, **asdict(stats)}
+
+    def _scale_rra_terms(self) -> None:
+        """``rra.term_scales=spread``: the jocc reward's s_g and s_ξ from the spreads of its
+        two terms between the silent and the greedy RRA policy, under the acting system and
+        the IVoI estimator the RRA agents are paid with, on calibration scenarios of the
+        training traces (:func:`~vdtn_marl.core.reward.spread_scales`)."""
+        cfg, params = self.cfg, self.params
+        subframes = params.platoon.subframes_per_interval
+        measured = {}
+        what = f"the RRA reward's terms under silent and greedy RRA ({SCALE_SCENARIOS} scenarios)"
+        with logged_stage("term_scales", what, self.position["iteration"]):
+            for name in ("silent", "greedy"):
+                with torch.random.fork_rng(devices=[]):
+                    metrics = evaluate_system(
+                        params, self.control_policy(), make_rra_baseline(name, params, cfg.seed),
+                        perfect=False, episodes=SCALE_SCENARIOS,
+                        intervals=min(SCALE_INTERVALS, params.episode_intervals),
+                        seed=SCALE_SEED_OFFSET + cfg.seed * 100 + self.position["iteration"],
+                        gamma=self.gamma, device=self.device, trace_source=self.train_traces,
+                        ivoi_estimator=self.estimator, completion=self.completion,
+                    ).metrics  # fmt: skip
+                links = params.radio.num_subchannels  # one V2I uplink per sub-channel
+                interval_mbps = metrics["v2i_throughput_mbps_per_link"] * links * subframes
+                measured[name] = (interval_mbps, metrics["ivoi_mean"])
+        throughput_scale, ivoi_scale = spread_scales(
+            (measured["silent"][0], measured["greedy"][0]),
+            (measured["silent"][1], measured["greedy"][1]),
+        )
+        entry = {
+            "jocc_iteration": self.position["iteration"],
+            "throughput_scale": throughput_scale, "ivoi_scale": ivoi_scale,
+            "interval_throughput_mbps_silent": measured["silent"][0],
+            "interval_throughput_mbps_greedy": measured["greedy"][0],
+            "ivoi_mean_silent": measured["silent"][1], "ivoi_mean_greedy": measured["greedy"][1],
+        }  # fmt: skip
+        _log.info("RRA term scales: %s", entry)
+        kept = [
+            e
+            for e in self.position.get("term_scales", [])
+            if e["jocc_iteration"] != entry["jocc_iteration"]
+        ]
+        self.position["term_scales"] = [*kept, entry]
+        self._apply_term_scales()
+
+    def _apply_term_scales(self) -> None:
+        """Pay the RRA agents with the last scales ``rra.term_scales=spread`` measured (after
+        a resume too: the environment's state does not hold its reward)."""
+        scales = self.position.get("term_scales")
+        if not scales or self.rra is None:
+            return
+        env = self.rra.env
+        env.reward_fn = dataclasses.replace(
+            env.reward_fn,
+            throughput_scale=scales[-1]["throughput_scale"],
+            ivoi_scale=scales[-1]["ivoi_scale"],
+        )
 
     def _fit_value(self) -> None:
         """``rra.value_fit=acting``: fit the td estimator's v* on the states the acting system
@@ -670,6 +734,8 @@ class JointOptimisation:
     def _run_stages(self) -> dict[str, Any]:
         cfg = self.cfg
         resumed = cfg.resume and self.resume()
+        if resumed:
+            self._apply_term_scales()
         began = time.perf_counter()
         done_steps = 0
         if resumed:
