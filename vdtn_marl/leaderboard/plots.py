@@ -1,5 +1,6 @@
-"""The leaderboard's PNG plots per scenario (error traces, bars with CIs, CAM latency CDF, κ1
-Pareto front, training curves, Age of Information).
+"""The leaderboard's PNG plots per scenario (every method's V2I throughput against its |gap
+error| and its control cost, error traces, bars with CIs, CAM latency CDF, κ1 Pareto front,
+training curves, Age of Information).
 """
 
 from __future__ import annotations
@@ -26,6 +27,102 @@ def load_raw_evaluation(cell_dir: Path) -> dict[str, Any] | None:
         return None
     with np.load(path) as data:
         return {k: data[k] for k in data.files}
+
+
+#: Overrides of a method that place it in the JOCC κ1 sweep rather than set it apart from it.
+_SWEEP_KEYS = ("rra", "rra.name", "rra.kappa1", "rra.kappa2", "control", "control.name")
+
+
+def method_roles(
+    rows: Sequence[Mapping[str, Any]], overrides: Mapping[str, Sequence[str]] | None = None
+) -> dict[str, dict[str, Any]]:
+    """``{method: {"role", "kappa1"}}`` for :func:`~vdtn_marl.reporting.plots.plot_methods_pareto`
+    from the runs of one scenario (each with ``method``, ``rra``, ``control`` and ``kappa1``, as
+    a run's summary has them) and the methods' overrides (``benchmark.methods``).
+
+    ``baseline``: the RRA or the control is one of the non-learned policies
+    (:data:`~vdtn_marl.policies.registry.RRA_BASELINES`, ``CONTROL_BASELINES``). ``sweep``:
+    ``rra=jocc`` with learned control and a κ1, the methods whose other overrides agree (the
+    largest such group, e.g. not ``control.augmentation=false``). ``learned``: the others
+    (DRRA, throughput-only, a jocc method set apart by an override)."""
+    from vdtn_marl.policies.registry import CONTROL_BASELINES, RRA_BASELINES
+
+    overrides = overrides or {}
+    first: dict[str, Mapping[str, Any]] = {}
+    for row in rows:
+        first.setdefault(row["method"], row)
+    roles: dict[str, dict[str, Any]] = {}
+    groups: dict[tuple[str, ...], list[str]] = {}
+    for method, row in first.items():
+        rra, control, kappa1 = row.get("rra"), row.get("control"), row.get("kappa1")
+        kappa1 = float(kappa1) if is_finite(kappa1) else None
+        role = "learned"
+        if rra in RRA_BASELINES or control in CONTROL_BASELINES:
+            role = "baseline"
+        elif rra == "jocc" and control == "learned" and kappa1 is not None:
+            others = tuple(
+                sorted(
+                    o
+                    for o in overrides.get(method, ())
+                    if o.split("=", 1)[0].lstrip("+~") not in _SWEEP_KEYS
+                )
+            )
+            groups.setdefault(others, []).append(method)
+        roles[method] = {"role": role, "kappa1": kappa1}
+    if groups:
+        key = max(groups, key=lambda k: (len(groups[k]), -len(k)))
+        for method in groups[key]:
+            roles[method]["role"] = "sweep"
+    return roles
+
+
+def _run_choices(row: Mapping[str, Any]) -> Mapping[str, Any]:
+    """``row`` with its ``rra``, ``control`` and ``kappa1``, read from the run's config where
+    its summary lacks them (runs written before summaries named them)."""
+    if all(row.get(k) is not None for k in ("rra", "control", "kappa1")):
+        return row
+    from vdtn_marl import reporting
+
+    cfg_file = Path(row["run_dir"]) / CONFIG_FILE
+    config = reporting.tables._read_yaml(cfg_file) if cfg_file.is_file() else {}
+    flat = reporting.flatten(config or {})
+    return {
+        **row,
+        "rra": row.get("rra") or flat.get("rra.name"),
+        "control": row.get("control") or flat.get("control.name"),
+        "kappa1": row.get("kappa1") if row.get("kappa1") is not None else flat.get("rra.kappa1"),
+    }
+
+
+#: The every-method figures: their kinds (plot keys) in the report and their x metrics.
+PARETO_METHODS_X = {"pareto_methods": "gap_error_abs_m", "pareto_methods_cost": "control_cost"}
+_PARETO_X_WORDS = {"gap_error_abs_m": "|gap error|", "control_cost": "control cost"}
+
+
+def write_pareto_methods(
+    by_method: Mapping[str, Mapping[str, Mapping[str, Any]]],
+    roles: Mapping[str, Mapping[str, Any]],
+    scenario: str,
+    x: str,
+    path: Path,
+    interval: str,
+    note: str | None = None,
+) -> Path:
+    """One scenario's every-method figure: V2I throughput per link against ``x`` (a metric of
+    :data:`PARETO_METHODS_X`), each method at its mean over seeds with its ``interval`` (e.g.
+    ``95% Student-t CI``) as error bars; ``roles`` from :func:`method_roles`. Raises
+    ValueError when no method has both means."""
+    from vdtn_marl.reporting.plots import plot_methods_pareto
+
+    return plot_methods_pareto(
+        by_method,
+        path,
+        roles,
+        x=x,
+        title=f"{scenario}: V2I throughput against {_PARETO_X_WORDS.get(x, x)}, every method\n"
+        f"mean over seeds, bars: {interval}",
+        note=note,
+    )
 
 
 def write_plots(
@@ -57,6 +154,14 @@ def write_plots(
 
         def raw(method: str, seed: int, scenario: str = scenario) -> dict | None:
             return load_raw_evaluation(Cell(scenario, method, seed, ()).directory(cfg.out_dir))
+
+        # 0. every method: V2I throughput against |gap error| and against control cost
+        roles = method_roles([_run_choices(r) for r in scenario_rows], b.methods)
+        for kind, x in PARETO_METHODS_X.items():
+            with contextlib.suppress(ValueError):  # no method with both means
+                plots[kind] = write_pareto_methods(
+                    by_method, roles, scenario, x, report_dir / f"{prefix}{kind}.png", ci, note
+                )
 
         # 1. error traces of the trace methods, same scenario and seed
         pair = [m for m in b.trace_methods if m in by_method]

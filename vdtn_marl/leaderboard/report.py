@@ -377,6 +377,8 @@ def _markdown(
             ]
         scenario_plots = plots.get(scenario, {})
         captions = {
+            "pareto_methods": "V2I per link against |gap error|, every method",
+            "pareto_methods_cost": "V2I per link against control cost, every method",
             "error_traces": "Gap and speed errors over time",
             "v2i_throughput": "V2I throughput per link",
             "cam_delivery": "CAM delivery rate",

@@ -127,6 +127,216 @@ def plot_kappa1_pareto(
     return save_figure(fig, Path(path), note)
 
 
+GAP_ERROR = "gap_error_abs_m"
+#: The roles of the methods in :func:`plot_methods_pareto` (``{method: {"role", "kappa1"}}``):
+#: a baseline (its RRA or its control is not learned), a point of the JOCC κ1 sweep (learned
+#: RRA with the jocc reward, learned control), or another learned-RRA method (e.g. DRRA).
+METHOD_ROLES = ("baseline", "sweep", "learned")
+_PARETO_AXES = {
+    GAP_ERROR: "mean |gap error| (m)    ← better",
+    CONTROL_COST: "control cost (dimensionless)    ← better",
+    V2I_THROUGHPUT: "V2I throughput per link (Mbps)",
+}
+_ROLE_STYLE = {  # legend text, marker, colour
+    "baseline": ("baseline (RRA or control not learned)", "s", "0.45"),
+    "learned": ("learned RRA", "D", "C1"),
+    "sweep": ("JOCC κ1 sweep (learned RRA and control)", "o", "C0"),
+}
+
+
+def _interval_bars(stat: Mapping[str, Any]) -> list[list[float]] | None:
+    """``[[mean − low], [high − mean]]`` of a statistic, or None without a finite interval
+    (one run: no interval)."""
+    mean, low, high = (stat.get(k) for k in ("mean", "ci_low", "ci_high"))
+    if not (is_finite(low) and is_finite(high)):
+        return None
+    return [[max(0.0, float(mean) - float(low))], [max(0.0, float(high) - float(mean))]]
+
+
+def plot_methods_pareto(
+    stats: Mapping[str, Mapping[str, Mapping[str, Any]]],
+    path: str | Path,
+    roles: Mapping[str, Mapping[str, Any]] | None = None,
+    x: str = GAP_ERROR,
+    y: str = V2I_THROUGHPUT,
+    title: str | None = None,
+    note: str | None = None,
+) -> Path:
+    """Every method of one scenario as a point at its mean over seeds, its interval as error
+    bars in both axes: ``x`` (default mean |gap error|, lower is better) against ``y`` (default
+    V2I throughput per link, higher is better).
+
+    ``stats`` is one scenario of the leaderboard's statistics, ``{method: {metric: {"mean",
+    "ci_low", "ci_high", "n"}}}``; a statistic without a finite interval (one run) is drawn
+    without its error bar. ``roles`` (:data:`METHOD_ROLES`) gives ``{method: {"role",
+    "kappa1"}}``: baselines and other learned-RRA methods are markers labelled with their name,
+    the κ1 sweep a line through its points in the order of κ1, each labelled ``κ1=…``; a method
+    missing from ``roles`` counts as ``learned``. Methods without a finite mean of both
+    metrics are left out; they and those without an interval are named in the legend.
+    ``note`` is printed small under the axes. Writes a PNG (7 × 5 in, 120 dpi) atomically and
+    returns its path."""
+    if not stats:
+        raise ValueError(
+            "no method to plot: the statistics are empty (expected {method: {metric: "
+            "{mean, ci_low, ci_high, n}}})"
+        )
+    roles = roles or {}
+    points, missing = [], []
+    for method, metrics in stats.items():
+        sx, sy = metrics.get(x) or {}, metrics.get(y) or {}
+        if not (is_finite(sx.get("mean")) and is_finite(sy.get("mean"))):
+            missing.append(method)
+            continue
+        role = dict(roles.get(method) or {})
+        kind = role.get("role", "learned")
+        if kind not in METHOD_ROLES:
+            raise ValueError(f"role {kind!r} of {method!r} is not one of {', '.join(METHOD_ROLES)}")
+        kappa1 = role.get("kappa1")
+        if kind == "sweep" and not is_finite(kappa1):
+            kind = "learned"  # a sweep point needs its κ1
+        points.append({"method": method, "role": kind, "kappa1": kappa1, "x": sx, "y": sy})
+    if not points:
+        raise ValueError(
+            f"no method has a finite mean of both {x!r} and {y!r} (methods: {', '.join(stats)})"
+        )
+
+    plt = pyplot_agg()
+    from matplotlib.lines import Line2D
+
+    fig, ax = plt.subplots(figsize=(7.0, 5.0), dpi=120)
+    points.sort(key=lambda p: (p["role"] != "sweep", p["kappa1"] if p["role"] == "sweep" else 0))
+    for p in points:
+        _, marker, colour = _ROLE_STYLE[p["role"]]
+        ax.errorbar(
+            float(p["x"]["mean"]), float(p["y"]["mean"]), xerr=_interval_bars(p["x"]),
+            yerr=_interval_bars(p["y"]), fmt=marker, color=colour, markersize=6,
+            markeredgecolor="black", markeredgewidth=0.6, ecolor=colour, elinewidth=1.0,
+            capsize=3, alpha=0.9, zorder=3,
+        )  # fmt: skip
+    sweep = [p for p in points if p["role"] == "sweep"]
+    if len(sweep) > 1:
+        ax.plot([float(p["x"]["mean"]) for p in sweep], [float(p["y"]["mean"]) for p in sweep],
+                color=_ROLE_STYLE["sweep"][2], linewidth=1.4, zorder=2)  # fmt: skip
+
+    handles = [
+        Line2D([], [], marker=_ROLE_STYLE[r][1], color=_ROLE_STYLE[r][2], markeredgecolor="black",
+               markeredgewidth=0.6, linestyle="-" if r == "sweep" and len(sweep) > 1 else "none",
+               label=_ROLE_STYLE[r][0])
+        for r in ("sweep", "learned", "baseline")
+        if any(p["role"] == r for p in points)
+    ]  # fmt: skip
+    alone = [p["method"] for p in points if not all(map(_interval_bars, (p["x"], p["y"])))]
+    for names, what in ((alone, "no interval (one run)"), (missing, "not drawn (no value)")):
+        if names:
+            handles.append(Line2D([], [], linestyle="none", label=f"{what}: {', '.join(names)}"))
+    _better_axes(ax, x, y, title)
+    ax.autoscale_view()
+    low, high = ax.get_xlim()
+    ax.set_xlim(low, high + 0.06 * (high - low))  # room for the labels of the rightmost points
+    legend = ax.legend(handles=handles, loc="best", fontsize=8)
+    labels = [f"κ1={p['kappa1']:g}" if p["role"] == "sweep" else p["method"] for p in points]
+    _place_labels(
+        ax,
+        [float(p["x"]["mean"]) for p in points],
+        [float(p["y"]["mean"]) for p in points],
+        labels,
+        [_ROLE_STYLE[p["role"]][2] for p in points],
+        legend,
+    )
+    return save_figure(fig, Path(path), note)
+
+
+def _better_axes(ax: Any, x: str, y: str, title: str | None) -> None:
+    """Axis labels of :func:`plot_methods_pareto` with the better direction: ``← better`` in
+    the x label, ``better ↑`` upright above the y axis."""
+    ax.set_xlabel(_PARETO_AXES.get(x, x))
+    ax.set_ylabel(_PARETO_AXES.get(y, y))
+    ax.annotate(
+        "better ↑", (0.0, 1.0), xycoords="axes fraction", xytext=(-6, 4),
+        textcoords="offset points", ha="right", va="bottom", fontsize=9,
+    )  # fmt: skip
+    ax.grid(True, alpha=0.3)
+    if title:
+        ax.set_title(title, fontsize=10)
+
+
+def _place_labels(
+    ax: Any,
+    xs: list[float],
+    ys: list[float],
+    labels: list[str],
+    colours: list[str],
+    legend: Any = None,
+) -> None:
+    """Label each point beside it, at the first of a few places around it (right, left, above,
+    below, then further out with a leader line) where the label overlaps no marker, no label
+    already placed and stays inside the axes; else where it overlaps least. Labels sit on a
+    white box above the error bars; none covers ``legend``."""
+    import numpy as np
+
+    fig = ax.figure
+    fig.tight_layout()  # the layout the labels are placed in (save_figure keeps it close)
+    if not hasattr(fig.canvas, "get_renderer"):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        FigureCanvasAgg(fig)
+    renderer = fig.canvas.get_renderer()
+    pixels = ax.transData.transform(np.column_stack([xs, ys]))
+    per_point = fig.dpi / 72.0
+    half = 5.0 * per_point  # half a marker, pixels
+    boxes = [(px - half, py - half, px + half, py + half) for px, py in pixels]
+    frame = ax.get_window_extent(renderer)
+    if legend is not None:  # where "best" put it, fixed there (the labels would move it)
+        e = legend.get_window_extent(renderer)
+        corner = ax.transAxes.inverted().transform((e.x0, e.y0))
+        legend.set_bbox_to_anchor(tuple(corner), transform=ax.transAxes)
+        legend.set_loc("lower left")
+        legend.borderaxespad = 0.0
+        boxes.append((e.x0, e.y0, e.x1, e.y1))
+    near = [  # (dx, dy) points, horizontal alignment
+        ((8, 0), "left"), ((-8, 0), "right"), ((0, 10), "center"), ((0, -10), "center"),
+        ((8, 9), "left"), ((-8, 9), "right"), ((8, -9), "left"), ((-8, -9), "right"),
+    ]  # fmt: skip
+    far = [((dx * 2.2, dy * 2.2 if dy else 16), ha) for (dx, dy), ha in near if dx]
+    far += [((0, 24), "center"), ((0, -24), "center"), ((24, 0), "left"), ((-24, 0), "right")]
+
+    def overlap(a: tuple, b: tuple) -> float:
+        w = min(a[2], b[2]) - max(a[0], b[0])
+        h = min(a[3], b[3]) - max(a[1], b[1])
+        return w * h if w > 0 and h > 0 else 0.0
+
+    # the most crowded points first: they have the fewest free places
+    crowd = [sum(np.hypot(*(pixels[j] - pixels[i])) < 60 * per_point for j in range(len(xs)))
+             for i in range(len(xs))]  # fmt: skip
+    for i in sorted(range(len(xs)), key=lambda i: -crowd[i]):
+        best = None
+        for (dx, dy), ha in near + far:
+            text = ax.annotate(
+                labels[i], (xs[i], ys[i]), textcoords="offset points", xytext=(dx, dy),
+                fontsize=8, ha=ha, va="center", color=colours[i], zorder=5,
+                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+            )  # fmt: skip
+            e = text.get_window_extent(renderer)
+            box = (e.x0, e.y0, e.x1, e.y1)
+            score = sum(overlap(box, b) for b in boxes)
+            outside = e.x0 < frame.x0 or e.x1 > frame.x1 or e.y0 < frame.y0 or e.y1 > frame.y1
+            score += 1e6 if outside else 0.0
+            if best is None or score < best[0]:
+                if best is not None:
+                    best[1].remove()
+                best = (score, text, box, (dx, dy))
+            else:
+                text.remove()
+            if score == 0.0:
+                break
+        _, text, box, (dx, dy) = best
+        if abs(dx) > 10 or abs(dy) > 12:  # far from its point: a leader line
+            ax.annotate("", (xs[i], ys[i]), xytext=text.xyann, textcoords="offset points",
+                        arrowprops={"arrowstyle": "-", "lw": 0.5, "color": "0.5"},
+                        zorder=4)  # fmt: skip
+        boxes.append(box)
+
+
 TRAINING_CURVES_FILE = "training_curves.png"
 ERROR_TRACES_FILE = "error_traces.png"
 LATENCY_CDF_FILE = "cam_latency_cdf.png"
