@@ -102,7 +102,9 @@ def run_policy(name, params, trace_source, seed, episodes, intervals, horizons):
     estimators = [
         RolloutIVoIEstimator.from_reference(
             VoIReference(policy=None, value=None, discount=GAMMA),
-            horizon_intervals=h, bootstrap=False, baseline="optimal",
+            horizon_intervals=h,
+            bootstrap=False,
+            baseline="optimal",
         )  # fmt: skip
         for h in horizons
     ]
@@ -142,7 +144,8 @@ def run_policy(name, params, trace_source, seed, episodes, intervals, horizons):
         xi_term += alive * step ** (n - 1) * IVOI_SCALE * xi
         xi_raw += alive * xi
         for h, est in zip(horizons[1:], estimators[1:], strict=True):
-            xi_other[h] += alive * step ** (n - 1) * IVOI_SCALE * est(twin, record).double().mean(-1)
+            xi = est(twin, record).double().mean(-1)
+            xi_other[h] += alive * step ** (n - 1) * IVOI_SCALE * xi
         f = record.gap_error_m.shape[-1]
         gap_sum += alive * record.gap_error_m.abs().double().mean(-1)
         in_time = (record.cam_delay_subframes <= t_sub).double()
@@ -236,8 +239,7 @@ def analyse(per_seed: dict, seeds: list[int], horizons: list[int]) -> dict:
     Xi_n = {p: [(v - x_off) / (x_greedy - x_off) for v in Xi[p]] for p in Xi}
     # the scenarios where no policy collided (paired: the same scenarios for every policy)
     keep = [
-        ~np.any([np.asarray(per_seed[p][s]["collided"]) for p in per_seed], axis=0)
-        for s in seeds
+        ~np.any([np.asarray(per_seed[p][s]["collided"]) for p in per_seed], axis=0) for s in seeds
     ]
     P_nc = seed_means(per_seed, seeds, "P", keep)
     Xi_nc = seed_means(per_seed, seeds, "Xi", keep)
@@ -276,7 +278,8 @@ def ranking_table(title: str, rows: list[dict]) -> Table:
     for rank, r in enumerate(rows, 1):
         d = r["minus_" + COMPARE_WITH]
         t.add_row(str(rank), r["policy"], f"{r['P_mean']:.4f}", f"{r['Xi_mean']:.4f}",
-                  f"{r['J_mean']:.4f}", f"{d['mean']:+.4f} [{d['lo']:+.4f}, {d['hi']:+.4f}]")  # fmt: skip
+                  f"{r['J_mean']:.4f}",
+                  f"{d['mean']:+.4f} [{d['lo']:+.4f}, {d['hi']:+.4f}]")  # fmt: skip
     return t
 
 
@@ -389,7 +392,8 @@ def main() -> None:
             "subframes_per_interval": params.platoon.subframes_per_interval,
             "acting_control": "cacc, impaired observations, no completion",
             "ivoi": "rollout, baseline=optimal, reference = "
-            f"linear CACC on perfect observations, horizons {args.horizon} intervals (the first is the "
+            "linear CACC on perfect observations, "
+            f"horizons {args.horizon} intervals (the first is the "
             "main one), no bootstrap",
             "gamma_per_interval": GAMMA,
             "throughput_scale": THROUGHPUT_SCALE,
