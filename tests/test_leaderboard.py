@@ -375,8 +375,8 @@ def test_bad_benchmarks_are_rejected(changes, message):
 
 def test_shipped_benchmarks_plan_their_grid():
     shipped = (
-        ("smoke", 16), ("reduced", 185), ("leaderboard", 180), ("sensitivity", 25),
-        ("headline", 20), ("value_fit", 15),
+        ("smoke", 16), ("reduced", 205), ("leaderboard", 195), ("sensitivity", 25),
+        ("headline", 30), ("value_fit", 15),
     )  # fmt: skip
     for name, cells in shipped:
         data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
@@ -394,7 +394,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
     data = cli_help.read_conf_yaml("benchmark", "reduced.yaml")
     cfg = config.validate_benchmark(config.BenchConfig(benchmark=config.BenchmarkConfig(**data)))
     b = cfg.benchmark
-    assert b.version == "3.0"
+    assert b.version == "3.1"
     t = b.target
     assert isinstance(t, config.BenchmarkTargetConfig)
     assert (t.scenario, t.method, t.reference, t.max_error_ratio, t.min_seeds) == (
@@ -403,7 +403,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
     assert set(t.error_metrics) | {t.gain_metric} <= set(leaderboard.METRIC_KEYS)
     assert t.error_metrics == ["gap_error_abs_m", "speed_error_abs_mps"]
     assert t.gain_metric == "v2i_throughput_mbps_per_link"
-    for method in ("jocc_k050", "drra", "throughput", "greedy"):
+    for method in ("jocc_k050", "drra", "throughput", "greedy", "opportunistic"):
         assert config.benchmark_seeds(b, "platoon4", method) == list(range(10)), method
     assert config.benchmark_seeds(b, "platoon8", "jocc_k050") == list(range(5))
     for method in ("jocc_k025", "jocc_k050", "jocc_k075", "drra", "throughput",
@@ -415,7 +415,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
     assert smoke["version"] == "2.2" and smoke["experiment"] == "smoke"
     assert not any("jocc_iterations" in str(o) for o in smoke.get("budgets", {}).values())
     sens = cli_help.read_conf_yaml("benchmark", "sensitivity.yaml")
-    assert (sens["version"], sens["scenarios"]) == ("1.0", ["platoon4_noise90"])
+    assert (sens["version"], sens["scenarios"]) == ("1.1", ["platoon4_noise90"])
     assert sens["overrides"] == data["overrides"]
     assert {m: sens["methods"][m] for m in sens["methods"]} == {
         m: data["methods"][m] for m in sens["methods"]
@@ -426,7 +426,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
 
 
 def test_the_headline_and_value_fit_cells_are_reduced_cells():
-    """`headline` and `value_fit` reuse `reduced` 3.0's runs: each of their cells of a method
+    """`headline` and `value_fit` reuse `reduced` 3.1's runs: each of their cells of a method
     that `reduced` has is one of its cells, override for override (so it can be copied)."""
 
     def cells(name):
