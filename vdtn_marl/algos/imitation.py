@@ -68,6 +68,26 @@ def _check(name: str, value, low, kind=int) -> None:
         raise ValueError(f"{name}={value!r} must be {what} >= {low}")
 
 
+def _check_distillation(
+    params: TwinParams, rounds, scenarios, intervals, fit_steps, minibatch_size, lr
+) -> None:
+    """The sizes and step size of a distillation (either group's), each named when bad."""
+    _check("rounds", rounds, 1)
+    if rounds > MAX_ROUNDS:
+        raise ValueError(f"rounds={rounds!r} must be <= {MAX_ROUNDS}")
+    _check("scenarios", scenarios, 1)
+    _check("intervals", intervals, 1)
+    _check("fit_steps", fit_steps, 0)
+    _check("minibatch_size", minibatch_size, 1)
+    if intervals > params.episode_intervals:
+        raise ValueError(
+            f"intervals={intervals} must be <= the model's episode_intervals="
+            f"{params.episode_intervals}"
+        )
+    if not lr > 0:
+        raise ValueError(f"lr={lr!r} must be > 0")
+
+
 def distill_teacher(
     trainer: PPOTrainer,
     teacher: Callable[[DigitalTwin], torch.Tensor],
@@ -101,20 +121,7 @@ def distill_teacher(
     """
     if trainer.group != "vehicle":
         raise ValueError(f"distillation trains the 'vehicle' group, not {trainer.group!r}")
-    _check("rounds", rounds, 1)
-    if rounds > MAX_ROUNDS:
-        raise ValueError(f"rounds={rounds!r} must be <= {MAX_ROUNDS}")
-    _check("scenarios", scenarios, 1)
-    _check("fit_steps", fit_steps, 0)
-    _check("minibatch_size", minibatch_size, 1)
-    _check("intervals", intervals, 1)
-    if intervals > params.episode_intervals:
-        raise ValueError(
-            f"intervals={intervals} must be <= the model's episode_intervals="
-            f"{params.episode_intervals}"
-        )
-    if not lr > 0:
-        raise ValueError(f"lr={lr!r} must be > 0")
+    _check_distillation(params, rounds, scenarios, intervals, fit_steps, minibatch_size, lr)
     if not exploration_std_mps2 >= 0:
         raise ValueError(f"exploration_std_mps2={exploration_std_mps2!r} must be >= 0 m/s²")
     began = time.perf_counter()
@@ -248,20 +255,7 @@ def distill_rra_teacher(
     every 100 fit steps."""
     if trainer.group != "rra":
         raise ValueError(f"RRA distillation trains the 'rra' group, not {trainer.group!r}")
-    _check("rounds", rounds, 1)
-    if rounds > MAX_ROUNDS:
-        raise ValueError(f"rounds={rounds!r} must be <= {MAX_ROUNDS}")
-    _check("scenarios", scenarios, 1)
-    _check("intervals", intervals, 1)
-    _check("fit_steps", fit_steps, 0)
-    _check("minibatch_size", minibatch_size, 1)
-    if intervals > params.episode_intervals:
-        raise ValueError(
-            f"intervals={intervals} must be <= the model's episode_intervals="
-            f"{params.episode_intervals}"
-        )
-    if not lr > 0:
-        raise ValueError(f"lr={lr!r} must be > 0")
+    _check_distillation(params, rounds, scenarios, intervals, fit_steps, minibatch_size, lr)
     began = time.perf_counter()
     tick = progress or (lambda n: None)
     if not trainer.scaling_fitted:
