@@ -376,7 +376,7 @@ def test_bad_benchmarks_are_rejected(changes, message):
 def test_shipped_benchmarks_plan_their_grid():
     shipped = (
         ("smoke", 16), ("reduced", 205), ("leaderboard", 195), ("sensitivity", 25),
-        ("headline", 30), ("value_fit", 15),
+        ("headline", 80), ("value_fit", 15),
     )  # fmt: skip
     for name, cells in shipped:
         data = cli_help.read_conf_yaml("benchmark", f"{name}.yaml")
@@ -426,7 +426,7 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
 
 
 def test_the_headline_and_value_fit_cells_are_reduced_cells():
-    """`headline` and `value_fit` reuse `reduced` 3.1's runs: each of their cells of a method
+    """`headline` and `value_fit` reuse `reduced` 3.1's runs: each of their JOCC and DRRA cells
     that `reduced` has is one of its cells, override for override (so it can be copied)."""
 
     def cells(name):
@@ -437,7 +437,11 @@ def test_the_headline_and_value_fit_cells_are_reduced_cells():
         return {cell.name: cell.overrides for cell in leaderboard.plan(cfg)}
 
     reduced, headline, value_fit = cells("reduced"), cells("headline"), cells("value_fit")
-    assert headline and all(reduced[name] == o for name, o in headline.items())
+    common = {
+        name: o for name, o in headline.items()
+        if name in reduced and name.split("/")[1] in ("jocc_k050", "drra")
+    }  # fmt: skip
+    assert len(common) == 30 and all(reduced[name] == o for name, o in common.items())
     shared = {name: o for name, o in value_fit.items() if "vfit" not in name}
     assert len(shared) == 10 and all(headline[name] == o for name, o in shared.items())
     fitted = {name: o for name, o in value_fit.items() if "vfit" in name}
