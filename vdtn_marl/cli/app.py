@@ -58,6 +58,7 @@ from vdtn_marl.cli.help import (
 )
 from vdtn_marl.cli.prepass import (
     HYDRA_COMMANDS,
+    check_fresh,
     eval_overrides,
     job_config,
     prevalidate,
@@ -414,7 +415,7 @@ def _launch(command: str, hydra_argv: list[str]) -> int:
     """Run the ``@hydra.main`` app of ``command`` with ``hydra_argv`` as its command line."""
     import hydra
 
-    from vdtn_marl.experiment.config import register_configs
+    from vdtn_marl.experiment.compose import register_configs
 
     register_configs()
     app = hydra.main(
@@ -484,15 +485,19 @@ def _cmd_hydra(command: str, argv: list[str]) -> int:
 
 
 def _cmd_hydra_run(command, argv, hargs, searchpath, passthrough, before: str) -> int:
+    from vdtn_marl.errors import RunFileError
+    from vdtn_marl.io.files import new_run_stamp, run_lock
     from vdtn_marl.io.interrupts import check_interrupt
 
+    new_run_stamp()  # the default run folder's name: one per launch (conf/config.yaml)
+    run = None
     try:
         user = list(hargs.overrides)
         if command == "eval" and not passthrough:
             user = eval_overrides(user, searchpath)
         overrides = [*user, f"hydra.job.name={command}"]
         if not passthrough:
-            prevalidate(command, hargs, [*overrides, *searchpath])
+            run = prevalidate(command, hargs, [*overrides, *searchpath])
         check_interrupt()
     except CLIError as exc:
         print(f"error: {exc}", file=sys.stderr)
@@ -500,6 +505,22 @@ def _cmd_hydra_run(command, argv, hargs, searchpath, passthrough, before: str) -
     except KeyboardInterrupt:
         print(before, file=sys.stderr)
         return EXIT_INTERRUPTED
+    with contextlib.ExitStack() as stack:
+        if run is not None:
+            # Held from before Hydra writes .hydra/ and the job's log: a launcher that loses
+            # the race for the folder touches nothing in it.
+            run_dir, resume = run
+            try:
+                stack.enter_context(run_lock(run_dir))
+                if not resume:  # free at the pre-pass; a launcher that won it may have ended
+                    check_fresh(command, "hydra.run.dir", run_dir, run_dir)
+            except (RunFileError, CLIError) as exc:
+                print(f"error: {exc}", file=sys.stderr)
+                return EXIT_CONFIG_ERROR
+        return _launch_job(command, argv, hargs, overrides)
+
+
+def _launch_job(command: str, argv: list[str], hargs: argparse.Namespace, overrides) -> int:
     try:
         # Flags first, then the overrides: the order Hydra's own parser accepts.
         return _launch(command, [*_flag_args(argv, list(hargs.overrides)), *overrides])

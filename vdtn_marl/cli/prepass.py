@@ -145,18 +145,13 @@ def _require_option(key: str, value: str, group: str) -> None:
                        f"{', '.join(options)}")  # fmt: skip
 
 
-def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: int | None) -> None:
+def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: int | None) -> Path:
     """A job never overwrites a run: its folder (``hydra.run.dir``, or for job ``job_num`` of a
-    sweep ``hydra.sweep.dir/hydra.sweep.subdir``) must hold none, unless ``resume=true``
-    continues it (``train``/``jocc``; the config must then be the run's)."""
+    sweep ``hydra.sweep.dir/hydra.sweep.subdir``) must not be in use by a live run, and must
+    hold none unless ``resume=true`` continues it (``train``/``jocc``; the config must then be
+    the run's). Returns the job's folder."""
     from omegaconf import open_dict, read_write
 
-    from vdtn_marl.io.files import run_outputs
-
-    if run_cfg.resume and command != "eval":
-        if job_num is None:
-            _check_resume(run_cfg, data, cfg.hydra)
-        return
     if job_num is None:
         key, folder = "hydra.run.dir", Path(str(cfg.hydra.run.dir))
         job_dir, where = folder, ""
@@ -167,6 +162,32 @@ def _check_run_dir(command: str, run_cfg: Any, data: dict, cfg: Any, job_num: in
             key, folder = "hydra.sweep.dir", Path(str(cfg.hydra.sweep.dir))
             job_dir = folder / str(cfg.hydra.sweep.subdir)
         where = f" in {job_dir}"
+    check_not_running(key, folder, job_dir, where)
+    if run_cfg.resume and command != "eval":
+        if job_num is None:
+            _check_resume(run_cfg, data, cfg.hydra)
+        return job_dir
+    check_fresh(command, key, folder, job_dir, where)
+    return job_dir
+
+
+def check_not_running(key: str, folder: Path, job_dir: Path, where: str = "") -> None:
+    """:class:`CLIError` if a live run holds ``job_dir``'s lock
+    (:func:`~vdtn_marl.io.files.run_lock`)."""
+    from vdtn_marl.io.files import lock_holder
+
+    holder = lock_holder(job_dir)
+    if holder is not None:
+        raise CLIError(
+            f"{key}={folder} is in use by a run still running{where} (pid {holder}); allowed: "
+            f"another {key}, or resume=true once that run has ended"
+        )
+
+
+def check_fresh(command: str, key: str, folder: Path, job_dir: Path, where: str = "") -> None:
+    """:class:`CLIError` if ``job_dir`` already holds a run (a job without ``resume=true``)."""
+    from vdtn_marl.io.files import run_outputs
+
     found = run_outputs(job_dir)
     if found:
         allowed = (
@@ -224,7 +245,7 @@ def eval_overrides(overrides: list[str], extra: Sequence[str] = ()) -> list[str]
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     from vdtn_marl.errors import ConfigError
-    from vdtn_marl.experiment.config import register_configs
+    from vdtn_marl.experiment.compose import register_configs
 
     register_configs()
     with initialize_config_module(config_module=CONFIG_PACKAGE, version_base="1.3"):
@@ -318,11 +339,15 @@ def _hydra_value(value: Any) -> str:
     return "'" + str(value).replace("'", "\\'") + "'"
 
 
-def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -> None:
-    """Compose and validate every job of the command line; raise :class:`CLIError`."""
+def prevalidate(
+    command: str, hargs: argparse.Namespace, overrides: list[str]
+) -> tuple[Path, bool] | None:
+    """Compose and validate every job of the command line; raise :class:`CLIError`. Returns
+    the folder of a single ``train``, ``jocc`` or ``eval`` run and whether the run continues
+    one there (``resume=true``); None for a sweep, ``--cfg`` or ``bench``."""
     from hydra import initialize_config_module
 
-    from vdtn_marl.experiment.config import register_configs
+    from vdtn_marl.experiment.compose import register_configs
 
     config_name = HYDRA_COMMANDS[command]
     register_configs()
@@ -331,6 +356,7 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
             jobs = _job_overrides(overrides, bool(hargs.multirun))
         except Exception as exc:
             raise CLIError(translate(exc, config_name, overrides)) from exc
+        run = None
         for index, job in enumerate(jobs):
             shown = " ".join(o for o in job if not o.startswith(("hydra.", "hydra/")))
             where = f" (sweep job {index}: {shown})" if len(jobs) > 1 else ""
@@ -348,8 +374,10 @@ def prevalidate(command: str, hargs: argparse.Namespace, overrides: list[str]) -
                     run_cfg = to_run_config(data, command)
                     if not hargs.cfg:
                         job_num = index if hargs.multirun else None
-                        _check_run_dir(command, run_cfg, data, cfg, job_num)
+                        job_dir = _check_run_dir(command, run_cfg, data, cfg, job_num)
+                        run = (job_dir, bool(run_cfg.resume) and command != "eval")
             except CLIError as exc:
                 raise CLIError(f"{exc}{where}") from exc
             except Exception as exc:
                 raise CLIError(f"{translate(exc, config_name, job)}{where}") from exc
+    return None if hargs.multirun else run

@@ -26,13 +26,29 @@ CONFIG_PACKAGE = "vdtn_marl.conf"
 SCHEMA_WARNING = "(?s).*is validated against ConfigStore schema with the same name"
 
 
+#: The resolver of the default run folder's name (``conf/config.yaml``: ``hydra.run.dir``).
+RUN_STAMP_RESOLVER = "run_stamp"
+
+
+def register_configs() -> None:
+    """The schemas in Hydra's ConfigStore
+    (:func:`vdtn_marl.experiment.config.register_configs`) and the resolver
+    ``${run_stamp:}`` (:func:`vdtn_marl.io.files.run_stamp`) the configs use."""
+    from omegaconf import OmegaConf
+
+    from vdtn_marl.experiment import config
+    from vdtn_marl.io.files import run_stamp
+
+    config.register_configs()
+    if not OmegaConf.has_resolver(RUN_STAMP_RESOLVER):
+        OmegaConf.register_new_resolver(RUN_STAMP_RESOLVER, run_stamp)
+
+
 @contextlib.contextmanager
 def hydra_compose() -> Iterator[None]:
     """Hydra's compose API: inside a Hydra app it is ready; elsewhere initialise it here."""
     from hydra import initialize_config_module
     from hydra.core.global_hydra import GlobalHydra
-
-    from vdtn_marl.experiment.config import register_configs
 
     if GlobalHydra.instance().is_initialized():
         yield

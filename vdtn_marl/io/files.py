@@ -12,9 +12,11 @@ import csv
 import json
 import math
 import os
+import secrets
 import shlex
 import sys
 import tempfile
+import time
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -81,15 +83,68 @@ def remove_stale_temp_files(run_dir: str | Path) -> list[Path]:
     return stale
 
 
+_RUN_STAMP: list[str] = []  # this launch's, once drawn
+
+
+def new_run_stamp() -> str:
+    """Draw the stamp of a new launch (:func:`run_stamp`) and return it."""
+    stamp = f"{time.strftime('%Y-%m-%d_%H-%M-%S')}_{secrets.token_hex(3)}"
+    _RUN_STAMP[:] = [stamp]
+    return stamp
+
+
+def run_stamp() -> str:
+    """The default name of a run's folder (``conf/config.yaml``: ``hydra.run.dir``): the
+    launch's local time and 6 random hex digits, ``2026-12-07_10-31-05_4f2a9c``, the same
+    every time one launch asks (its config checks and its run), so that two launches in one
+    second get two folders. The command line draws a new one per launch (:func:`new_run_stamp`)."""
+    return _RUN_STAMP[0] if _RUN_STAMP else new_run_stamp()
+
+
 LOCK_FILE = ".lock"
 _HELD_LOCKS: dict[Path, list] = {}  # run dir → [open lock file, depth]
+
+
+def _same_file(handle: Any, path: Path) -> bool:
+    """Whether ``handle`` is still the file at ``path`` (a holder removes the lock file when it
+    lets go: a handle opened just before is then a file no other launcher sees)."""
+    try:
+        here, there = os.fstat(handle.fileno()), os.stat(path)
+    except FileNotFoundError:
+        return False
+    return (here.st_dev, here.st_ino) == (there.st_dev, there.st_ino)
+
+
+def lock_holder(run_dir: str | Path) -> str | None:
+    """The pid of the live process that holds ``run_dir``'s lock (:func:`run_lock`), or None
+    (no lock file, a lock file left by a process that is gone, or this process's own lock).
+    Writes nothing."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - Windows
+        return None
+    path = Path(run_dir).resolve() / LOCK_FILE
+    if path.parent in _HELD_LOCKS:
+        return None
+    try:
+        handle = open(path, encoding="utf-8")  # noqa: SIM115 - closed below
+    except OSError:
+        return None
+    with handle:
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_SH | fcntl.LOCK_NB)
+        except OSError:
+            return handle.read().strip() or "unknown"
+    return None
 
 
 @contextlib.contextmanager
 def run_lock(run_dir: str | Path) -> Iterator[None]:
     """Hold ``run_dir``'s lock (an exclusive ``flock`` on ``run_dir/.lock``, released when the
     process ends however it ends): a second process that tries to run in the same folder gets
-    :class:`RunFileError` naming the folder and the holder's pid. Re-entrant in one process;
+    :class:`RunFileError` naming the folder and the holder's pid. The lock file is removed
+    when the block ends (a process killed before leaves one that locks nothing), and the
+    folder too where the block created it and it is still empty. Re-entrant in one process;
     a no-op where ``fcntl`` is missing (Windows)."""
     try:
         import fcntl
@@ -105,18 +160,24 @@ def run_lock(run_dir: str | Path) -> Iterator[None]:
         finally:
             held[1] -= 1
         return
+    created = not key.exists()
     key.mkdir(parents=True, exist_ok=True)
-    handle = open(key / LOCK_FILE, "a+", encoding="utf-8")  # noqa: SIM115 - held until exit
-    try:
-        fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError:
-        handle.seek(0)
-        holder = handle.read().strip() or "unknown"
-        handle.close()
-        raise RunFileError(
-            f"{key} is in use by another run (pid {holder}): two launchers must not write "
-            "into one run directory; wait for it to end or pick another directory"
-        ) from None
+    path = key / LOCK_FILE
+    while True:
+        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 - held until exit
+        try:
+            fcntl.flock(handle.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.seek(0)
+            holder = handle.read().strip() or "unknown"
+            handle.close()
+            raise RunFileError(
+                f"{key} is in use by another run (pid {holder}): two launchers must not write "
+                "into one run directory; wait for it to end or pick another directory"
+            ) from None
+        if _same_file(handle, path):
+            break
+        handle.close()  # its holder removed it as we opened it: lock the new one
     handle.seek(0)
     handle.truncate()
     handle.write(f"{os.getpid()}\n")
@@ -126,7 +187,11 @@ def run_lock(run_dir: str | Path) -> Iterator[None]:
         yield
     finally:
         del _HELD_LOCKS[key]
+        path.unlink(missing_ok=True)  # while still held: no other launcher holds this file
         handle.close()  # releases the flock
+        if created:
+            with contextlib.suppress(OSError):  # not empty: a run's files are there
+                key.rmdir()
 
 
 def atomic_write_text(path: str | Path, text: str) -> Path:
