@@ -337,8 +337,8 @@ def _bench(**changes) -> config.BenchConfig:
             "report; allowed: control_cost, gap_error_abs_m",
         ),
         (
-            {"target": {"scenario": "platoon8", "method": "a", "reference": "b"}},
-            "benchmark.target.scenario='platoon8' is not a scenario of the benchmark",
+            {"target": {"scenarios": ["platoon8"], "method": "a", "reference": "b"}},
+            "benchmark.target.scenarios names 'platoon8', which is not a scenario",
         ),
         (
             {"target": {"method": "a", "reference": "b", "min_seeds": 2}},
@@ -397,8 +397,8 @@ def test_reduced_checks_the_headline_target_on_ten_seeds():
     assert b.version == "3.1"
     t = b.target
     assert isinstance(t, config.BenchmarkTargetConfig)
-    assert (t.scenario, t.method, t.reference, t.max_error_ratio, t.min_seeds) == (
-        "platoon4", "jocc_k050", "drra", 1.25, 10,
+    assert (t.scenarios, t.method, t.reference, t.max_error_ratio, t.min_seeds) == (
+        ["platoon4"], "jocc_k050", "drra", 1.25, 10,
     )  # fmt: skip
     assert set(t.error_metrics) | {t.gain_metric} <= set(leaderboard.METRIC_KEYS)
     assert t.error_metrics == ["gap_error_abs_m", "speed_error_abs_mps"]
@@ -853,27 +853,32 @@ def test_fieller_interval_of_a_ratio_by_hand():
     assert leaderboard.fieller_ratio_ci([1.0, 2.0], [-1.0, 1.0]) == (None, None, None)
 
 
-def _target_rows(errors: dict[str, list[float]], gain: dict[str, list[float]]) -> list[dict]:
-    """Rows of methods "jocc" and "drra" on platoon4: per seed, gap error = errors[m][k],
+def _target_rows(
+    errors: dict[str, list[float]], gain: dict[str, list[float]], scenario: str = "platoon4"
+) -> list[dict]:
+    """Rows of methods "jocc" and "drra" on ``scenario``: per seed, gap error = errors[m][k],
     speed error = errors[m][k] / 2, V2I throughput = gain[m][k]."""
     rows = []
     for method in ("jocc", "drra"):
         for seed, (error, v2i) in enumerate(zip(errors[method], gain[method], strict=True)):
             rows.append(
-                {"scenario": "platoon4", "method": method, "seed": seed,
+                {"scenario": scenario, "method": method, "seed": seed,
                  "gap_error_abs_m": error, "speed_error_abs_mps": error / 2,
                  "v2i_throughput_mbps_per_link": v2i}
             )  # fmt: skip
     return rows
 
 
-def _target_benchmark(min_seeds: int = 10) -> config.BenchmarkConfig:
+def _target_benchmark(
+    min_seeds: int = 10, scenarios: tuple[str, ...] = ("platoon4",)
+) -> config.BenchmarkConfig:
     return config.BenchmarkConfig(
         name="t",
+        scenarios=list(scenarios),
         methods={"jocc": [], "drra": []},
         seeds=list(range(10)),
         target=config.BenchmarkTargetConfig(
-            scenario="platoon4", method="jocc", reference="drra", max_error_ratio=1.25,
+            scenarios=list(scenarios), method="jocc", reference="drra", max_error_ratio=1.25,
             error_metrics=["gap_error_abs_m", "speed_error_abs_mps"],
             gain_metric="v2i_throughput_mbps_per_link", min_seeds=min_seeds,
         ),
@@ -915,8 +920,8 @@ def test_target_met_by_hand_made_summaries():
 
     text = "\n".join(target_markdown(result))
     assert text.startswith("## Target: jocc against drra on platoon4")
-    assert "| \\|gap error\\| (m): ratio | 10 |" in text
-    assert "| V2I throughput per link (Mbps): difference | 10 |" in text
+    assert "| platoon4 | \\|gap error\\| (m): ratio | 10 |" in text
+    assert "| platoon4 | V2I throughput per link (Mbps): difference | 10 |" in text
     assert "| ratio ≤ 1.25 | met |" in text and "**Target met.**" in text
 
 
@@ -936,6 +941,35 @@ def test_target_missed_by_hand_made_summaries():
     assert gap["status"] == "missed" and gap["verdict"] == f"missed by {ratio - 1.25:.3g}"
     assert v2i["ci_high"] < 0 and v2i["estimate"] == pytest.approx(-0.118)
     assert v2i["verdict"] == "missed by 0.118"
+
+
+def test_target_on_two_scenarios_is_met_only_when_met_on_both():
+    factors = [1.05, 1.10, 1.15, 1.08, 1.12, 1.06, 1.14, 1.09, 1.11, 1.07]
+    good = _target_rows(
+        {"jocc": [e * f for e, f in zip(DRRA_ERRORS, factors, strict=True)], "drra": DRRA_ERRORS},
+        {"jocc": [v + 0.05 + 0.004 * k for k, v in enumerate(DRRA_V2I)], "drra": DRRA_V2I},
+        scenario="platoon4",
+    )
+    bad = _target_rows(
+        {"jocc": [2 * e for e in DRRA_ERRORS], "drra": DRRA_ERRORS},
+        {"jocc": [v + 0.05 + 0.004 * k for k, v in enumerate(DRRA_V2I)], "drra": DRRA_V2I},
+        scenario="platoon8",
+    )
+    both = _target_benchmark(scenarios=("platoon4", "platoon8"))
+    result = leaderboard.check_target(good + bad, both)
+    assert result["scenarios"] == ["platoon4", "platoon8"] and result["status"] == "missed"
+    by = {(c["scenario"], c["metric"]): c["status"] for c in result["criteria"]}
+    assert len(by) == 6 and by[("platoon4", "gap_error_abs_m")] == "met"
+    assert by[("platoon8", "gap_error_abs_m")] == "missed"
+    assert by[("platoon8", "v2i_throughput_mbps_per_link")] == "met"
+    # met on platoon4, and platoon8 has no cells yet: not decided, never met
+    result = leaderboard.check_target(good, both)
+    assert result["status"] == "not decided"
+    from vdtn_marl.leaderboard.target import target_markdown
+
+    text = "\n".join(target_markdown(result))
+    assert text.startswith("## Target: jocc against drra on platoon4, platoon8")
+    assert "| platoon8 | \\|gap error\\| (m): ratio | 0 |" in text
 
 
 def test_target_not_decided_with_few_seeds_or_a_wide_interval():

@@ -493,7 +493,8 @@ BENCHMARK_INTERVALS = ("t", "bca", "percentile")
 class BenchmarkTargetConfig:
     """The benchmark's headline claim, checked by the report (``benchmark.target``).
 
-    On ``scenario``, ``method`` against ``reference``, paired by seed (the seeds both have):
+    On each of ``scenarios``, ``method`` against ``reference``, paired by seed (the seeds both
+    have; the target is met when it is met on every scenario):
     for each of ``error_metrics`` the ratio of means method/reference must stay at or below
     ``max_error_ratio`` (its interval: Fieller's, the ratios ρ for which the t interval of the
     per-seed differences method − ρ·reference holds 0), and ``gain_metric`` must be above the
@@ -501,7 +502,7 @@ class BenchmarkTargetConfig:
     only from ``min_seeds`` paired seeds on (vdtn_marl.leaderboard.target).
     """
 
-    scenario: str = "platoon4"
+    scenarios: list[str] = field(default_factory=lambda: ["platoon4"])
     method: str = ""
     reference: str = ""
     max_error_ratio: float = 1.25
@@ -812,11 +813,16 @@ def _validate_target(b: BenchmarkConfig) -> None:
     t = b.target
     from vdtn_marl.experiment.metrics import METRIC_KEYS
 
-    if t.scenario not in b.scenarios:
+    if not t.scenarios:
         raise ConfigError(
-            f"benchmark.target.scenario={t.scenario!r} is not a scenario of the benchmark; "
-            f"allowed: {', '.join(b.scenarios)}"
+            f"benchmark.target.scenarios is empty; allowed: some of {', '.join(b.scenarios)}"
         )
+    for scenario in t.scenarios:
+        if scenario not in b.scenarios:
+            raise ConfigError(
+                f"benchmark.target.scenarios names {scenario!r}, which is not a scenario of the "
+                f"benchmark; allowed: {', '.join(b.scenarios)}"
+            )
     for key in ("method", "reference"):
         value = getattr(t, key)
         if value not in b.methods:
@@ -844,16 +850,17 @@ def _validate_target(b: BenchmarkConfig) -> None:
         )
     _real("benchmark.target.max_error_ratio", t.max_error_ratio, 0.0, 1e9, low_open=True)
     _positive_int("benchmark.target.min_seeds", t.min_seeds, low=2, high=10**9)
-    paired = set(benchmark_seeds(b, t.scenario, t.method)) & set(
-        benchmark_seeds(b, t.scenario, t.reference)
-    )
-    if len(paired) < t.min_seeds:
-        raise ConfigError(
-            f"benchmark.target.min_seeds={t.min_seeds} but the benchmark runs {t.method} and "
-            f"{t.reference} on {t.scenario} for {len(paired)} common seed(s), so the target "
-            "could never be decided; allowed: more benchmark.seeds or benchmark.extra_seeds, "
-            "or a smaller min_seeds"
+    for scenario in t.scenarios:
+        paired = set(benchmark_seeds(b, scenario, t.method)) & set(
+            benchmark_seeds(b, scenario, t.reference)
         )
+        if len(paired) < t.min_seeds:
+            raise ConfigError(
+                f"benchmark.target.min_seeds={t.min_seeds} but the benchmark runs {t.method} and "
+                f"{t.reference} on {scenario} for {len(paired)} common seed(s), so the target "
+                "could never be decided; allowed: more benchmark.seeds or benchmark.extra_seeds, "
+                "or a smaller min_seeds"
+            )
 
 
 def register_configs() -> None:

@@ -580,7 +580,10 @@ def print_leaderboard(path: str | Path, console: Any = None) -> None:
     if target:
         console.print(
             f"target ({target['method']} against {target['reference']} on "
-            f"{target['scenario']}): {target['status']}"
+            f"{', '.join(target['scenarios'])}): {target['status']}"
         )
         for c in target["criteria"]:
-            console.print(f"  {c['label']} ({c['requirement']}, n = {c['n']}): {c['verdict']}")
+            console.print(
+                f"  {c['scenario']}, {c['label']} ({c['requirement']}, n = {c['n']}): "
+                f"{c['verdict']}"
+            )

@@ -1,8 +1,8 @@
 """The benchmark's headline claim (``benchmark.target``), checked paired by seed.
 
-On one scenario, ``method`` (e.g. JOCC, κ1 = 0.5) against ``reference`` (e.g. DRRA), on the
-seeds both have (every method of a scenario is evaluated on the same held-out scenarios per
-seed):
+On each of its scenarios, ``method`` (e.g. JOCC, κ1 = 0.5) against ``reference`` (e.g. DRRA),
+on the seeds both have (every method of a scenario is evaluated on the same held-out scenarios
+per seed):
 
 - **error criteria** (``error_metrics``, e.g. mean |gap error| and |speed error|): the ratio of
   means R = x̄ / ȳ (x: the method's per-seed values, y: the reference's) must be at most
@@ -24,9 +24,9 @@ Verdicts: ``met`` (the whole interval on the right side of the bound), ``missed 
 whole interval on the wrong side; X is the point estimate's distance to the bound),
 ``not decided: n = k < min_seeds = m`` (too few paired seeds, whatever the interval), or
 ``not decided: the interval straddles the bound (b)`` (``... is unbounded ...`` for a Fieller
-interval without bounds). The target is met when every criterion is, missed when one is.
-The intervals are Student-t based whatever ``benchmark.interval`` is, at
-``benchmark.confidence``.
+interval without bounds). The target is met when every criterion is met on every scenario,
+missed when one is missed. The intervals are Student-t based whatever ``benchmark.interval``
+is, at ``benchmark.confidence``.
 """
 
 from __future__ import annotations
@@ -123,22 +123,14 @@ def _verdict(
     return UNDECIDED, f"not decided: the interval straddles the bound ({_fmt(bound)})"
 
 
-def check_target(
-    rows: Sequence[Mapping[str, Any]], benchmark: BenchmarkConfig
-) -> dict[str, Any] | None:
-    """The target report (None without ``benchmark.target``): the definition, one entry per
-    criterion (metric, kind, n, seeds, both means, estimate with ``ci_low``/``ci_high``,
-    bound, status, verdict) and the overall status."""
-    target = benchmark.target
-    if target is None:
-        return None
-    if isinstance(target, Mapping):
-        target = BenchmarkTargetConfig(**dict(target))
-    labels = {m.key: m.label.replace("\\", "") for m in METRICS}
-    confidence = benchmark.confidence
+def _scenario_criteria(
+    rows: Sequence[Mapping[str, Any]], target: BenchmarkTargetConfig, scenario: str,
+    confidence: float, labels: Mapping[str, str],
+) -> list[dict[str, Any]]:  # fmt: skip
+    """The target's criteria on one scenario (see :func:`check_target`)."""
     criteria = []
     for key in target.error_metrics:
-        seeds, x, y = _paired(rows, target.scenario, target.method, target.reference, key)
+        seeds, x, y = _paired(rows, scenario, target.method, target.reference, key)
         ratio = low = high = None
         if seeds:
             ratio, low, high = fieller_ratio_ci(x, y, confidence)
@@ -154,6 +146,7 @@ def check_target(
         )  # fmt: skip
         criteria.append(
             {
+                "scenario": scenario,
                 "metric": key,
                 "label": labels.get(key, key),
                 "kind": "error_ratio",
@@ -174,7 +167,7 @@ def check_target(
         )
     if target.gain_metric is not None:
         key = target.gain_metric
-        seeds, x, y = _paired(rows, target.scenario, target.method, target.reference, key)
+        seeds, x, y = _paired(rows, scenario, target.method, target.reference, key)
         mean = low = high = None
         if seeds:
             mean, low, high = t_ci([a - b for a, b in zip(x, y, strict=True)], confidence)
@@ -183,6 +176,7 @@ def check_target(
         )
         criteria.append(
             {
+                "scenario": scenario,
                 "metric": key,
                 "label": labels.get(key, key),
                 "kind": "gain_difference",
@@ -201,10 +195,31 @@ def check_target(
                 "verdict": verdict,
             }
         )
+    return criteria
+
+
+def check_target(
+    rows: Sequence[Mapping[str, Any]], benchmark: BenchmarkConfig
+) -> dict[str, Any] | None:
+    """The target report (None without ``benchmark.target``): the definition, one entry per
+    scenario and criterion (scenario, metric, kind, n, seeds, both means, estimate with
+    ``ci_low``/``ci_high``, bound, status, verdict) and the overall status."""
+    target = benchmark.target
+    if target is None:
+        return None
+    if isinstance(target, Mapping):
+        target = BenchmarkTargetConfig(**dict(target))
+    labels = {m.key: m.label.replace("\\", "") for m in METRICS}
+    confidence = benchmark.confidence
+    criteria = [
+        c
+        for scenario in target.scenarios
+        for c in _scenario_criteria(rows, target, scenario, confidence, labels)
+    ]
     statuses = {c["status"] for c in criteria}
     overall = MISSED if MISSED in statuses else MET if statuses == {MET} else UNDECIDED
     return {
-        "scenario": target.scenario,
+        "scenarios": list(target.scenarios),
         "method": target.method,
         "reference": target.reference,
         "max_error_ratio": float(target.max_error_ratio),
@@ -227,7 +242,7 @@ def target_markdown(result: Mapping[str, Any]) -> list[str]:
     m, r = result["method"], result["reference"]
     level = f"{result['confidence']:.0%}"
     lines = [
-        f"## Target: {m} against {r} on {result['scenario']}",
+        f"## Target: {m} against {r} on {', '.join(result['scenarios'])}",
         "",
         f"Paired by seed (the seeds both have), each criterion decided from "
         f"{result['min_seeds']} paired seeds on: every error metric's ratio of means "
@@ -236,8 +251,8 @@ def target_markdown(result: Mapping[str, Any]) -> list[str]:
         f"{m} − ρ·{r} contains 0), and the gain metric above {r}'s (the whole {level} "
         "Student-t interval of the paired differences above 0).",
         "",
-        f"| criterion | n | {m} | {r} | estimate [{level} CI] | requirement | verdict |",
-        "|---|--:|--:|--:|--:|---|---|",
+        f"| scenario | criterion | n | {m} | {r} | estimate [{level} CI] | requirement | verdict |",
+        "|---|---|--:|--:|--:|--:|---|---|",
     ]
     for c in result["criteria"]:
         signed = c["kind"] == "gain_difference"
@@ -253,7 +268,7 @@ def target_markdown(result: Mapping[str, Any]) -> list[str]:
                 f"[{_num(c['ci_low'], signed)}, {_num(c['ci_high'], signed)}]"
             )
         lines.append(
-            f"| {label}: {what} | {c['n']} | {_num(c['mean_method'])} | "
+            f"| {c['scenario']} | {label}: {what} | {c['n']} | {_num(c['mean_method'])} | "
             f"{_num(c['mean_reference'])} | {estimate} | {c['requirement']} | {c['verdict']} |"
         )
     lines += ["", f"**Target {result['status']}.**"]
