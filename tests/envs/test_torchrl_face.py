@@ -37,6 +37,20 @@ class FixedRRAPolicy:
         return torch.as_tensor(base, dtype=torch.long, device=observation.device)
 
 
+class OwnSubchannelRRAPolicy:
+    """Link l on sub-channel l at full power (action l·P): CAMs that are mostly delivered."""
+
+    def __init__(self, num_power_levels: int = 4):
+        self.num_power_levels = num_power_levels
+
+    def __call__(self, observation):
+        shape = observation.shape[:-1]
+        actions = np.broadcast_to(np.arange(shape[-1]) * self.num_power_levels, shape).copy()
+        if isinstance(observation, np.ndarray):
+            return actions.astype(np.int64)
+        return torch.as_tensor(actions, dtype=torch.long, device=observation.device)
+
+
 def _close(a, b, what):
     np.testing.assert_allclose(
         np.asarray(a, np.float64), np.asarray(b, np.float64), atol=ATOL, rtol=RTOL, err_msg=what
@@ -526,3 +540,113 @@ def test_rra_burn_in_leaves_a_platoon_that_has_been_driving():
 def test_bad_burn_in_raises(kwargs, match):
     with pytest.raises(ValueError, match=match):
         VDTNTorchRLEnv(episode_intervals=20, **kwargs)
+
+
+# ---------------------------------------------------------------------- state, infos, frames
+@pytest.mark.parametrize("mode", MODES)
+def test_state_and_infos_are_in_the_specs(mode):
+    env = VDTNTorchRLEnv(
+        mode=mode, batch_size=3, seed=0, episode_intervals=2, return_state=True, return_info=True
+    )
+    check_env_specs(env, seed=0)
+    n = env.twin.params.platoon.num_vehicles
+    assert env.full_observation_spec["state"].shape == (3, 3 * n)
+    for group, agents in env.group_map.items():
+        info = env.full_observation_spec[group, "info"]
+        assert set(info.keys()) == set(env.info_keys) and info.shape == (3, len(agents))
+    radio = {"cam_delivered", "aoi_ms", "v2i_throughput_mbps"}
+    assert radio.issubset(env.info_keys) == (mode != "control")
+    assert ("closes_interval" in env.info_keys) == (mode in ("rra", "joint"))
+    plain = VDTNTorchRLEnv(mode=mode, batch_size=3, seed=0, episode_intervals=2)
+    keys = set(plain.full_observation_spec.keys(True, True))
+    assert "state" not in keys and not any("info" in key for key in keys)
+
+
+@pytest.mark.parametrize("impaired", [False, True])
+def test_control_state_and_infos_are_the_pettingzoo_faces(impaired):
+    seed, kwargs = 11, {"episode_intervals": 6}
+    policy = {"rra_policy": OwnSubchannelRRAPolicy()} if impaired else {}
+    pz = PlatoonControlEnv(impaired=impaired, seed=seed, **policy, **kwargs)
+    mode = "control_impaired" if impaired else "control"
+    env = VDTNTorchRLEnv(
+        mode=mode, seed=seed, return_state=True, return_info=True, **policy, **kwargs
+    )
+    pz.reset()
+    names = pz.possible_agents
+    td = env.reset()
+    _close(td["state"][0], pz.state(), "state at reset")
+    rng = np.random.default_rng(0)
+    delivered = 0
+    for step in range(6):
+        u = rng.uniform(-2.0, 2.0, size=len(names)).astype(np.float32)
+        _, _, _, _, infos = pz.step({n: u[i : i + 1] for i, n in enumerate(names)})
+        td["vehicle", "action"] = torch.as_tensor(u)[None, :, None]
+        nxt = env.step(td)["next"]
+        _close(nxt["state"][0], pz.state(), f"state at step {step}")
+        info = nxt["vehicle", "info"][0]
+        for key, pz_key in [
+            ("gap_error_abs_m", "gap_error_m"),
+            ("speed_error_abs_mps", "speed_error_mps"),
+        ]:
+            _close(info[key], [abs(infos[n][pz_key]) for n in names], f"{key}, step {step}")
+        _close(info["collided"], [infos[n]["collided"] for n in names], f"collided, step {step}")
+        if impaired:
+            _close(info["cam_delivered"], [infos[n]["cam_delivered"] for n in names], "delivered")
+            delivered += int(info["cam_delivered"].sum())
+            v2i_mbps = float(pz.last_record.v2i_rate_bps.sum()) * 1e-6
+            _close(info["v2i_throughput_mbps"], [v2i_mbps] * len(names), f"V2I, step {step}")
+            # the content is at least the interval's own age: (T + 1) / 2 subframes on average
+            assert (info["aoi_ms"] >= 25.5 - 1e-4).all()
+        td = nxt
+    assert not impaired or 0 < delivered < 6 * len(names)  # both outcomes were compared
+
+
+def test_rra_state_and_infos_are_the_pettingzoo_faces():
+    seed, kwargs = 9, {"episode_intervals": 2, "kappa1": 0.3}
+    pz = V2XRRAEnv(seed=seed, **kwargs)
+    env = VDTNTorchRLEnv(mode="rra", seed=seed, return_state=True, return_info=True, **kwargs)
+    pz.reset()
+    names = pz.rra_agents
+    td = env.reset()
+    rng = np.random.default_rng(0)
+    n_act = pz.twin.params.radio.num_actions
+    closings = 0
+    for step in range(2 * pz.twin.subframes_per_interval):
+        a = rng.integers(0, n_act, size=len(names))
+        _, _, _, _, infos = pz.step({n: np.int64(a[i]) for i, n in enumerate(names)})
+        td["rra", "action"] = torch.as_tensor(a, dtype=torch.long)[None]
+        nxt = env.step(td)["next"]
+        _close(nxt["state"][0], pz.state(), f"state at step {step}")
+        info = nxt["rra", "info"][0]
+        for key in ("v2i_throughput_mbps", "cam_delivered", "collided", "closes_interval"):
+            _close(info[key], [infos[n][key] for n in names], f"{key}, step {step}")
+        if infos[names[0]]["closes_interval"]:
+            closings += 1
+            record = pz.last_record
+            _close(info["gap_error_abs_m"], record.gap_error_m[0].abs(), f"gap error, {step}")
+        else:  # the AoI at the subframe's end: what the RRA reward 'aoi' reads
+            _close(info["aoi_ms"], pz.twin.cam_age_ms()[0], f"AoI, step {step}")
+        td = nxt
+    assert closings == 2
+
+
+def test_the_batched_face_draws_what_the_pettingzoo_face_draws():
+    seed = 3
+    pz = PlatoonControlEnv(
+        impaired=True, seed=seed, rra_policy=FixedRRAPolicy(16), render_mode="rgb_array"
+    )
+    env = VDTNTorchRLEnv(mode="control_impaired", seed=seed, rra_policy=FixedRRAPolicy(16))
+    pz.reset()
+    td = env.reset()
+    for _ in range(2):
+        pz.step({n: np.array([0.5], np.float32) for n in pz.possible_agents})
+        td["vehicle", "action"] = torch.full((1, 3, 1), 0.5)
+        td = env.step(td)["next"]
+    frame = env.render(mode="rgb_array")
+    assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    np.testing.assert_array_equal(frame, pz.render())
+    with pytest.raises(ConfigError, match="rgb_array"):
+        env.render(mode="human")
+    batched = VDTNTorchRLEnv(mode="rra", batch_size=3, seed=seed)
+    batched.rollout(3)
+    assert batched.render().shape == frame.shape  # scenario 0 of B

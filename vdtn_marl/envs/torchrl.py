@@ -20,6 +20,40 @@ Keys: ``(group, "observation")``, ``(group, "action")``, ``(group, "reward")`` a
 [B, L, 1]). A collision of any follower terminates the scenario for every agent; truncation
 after ``episode_intervals`` intervals. Partial resets use the ``"_reset"`` entries.
 
+Two opt-in outputs, as TorchRL's ``PettingZooWrapper(return_state=True)`` and VMAS's infos
+(BenchMARL's tasks turn both on: its centralised critics read the state, its logger the infos):
+
+- ``return_state=True``: ``"state"`` [B, 3N] float32 at the root, the PettingZoo faces'
+  ``state()`` of each scenario: positions (m), speeds (m/s), accelerations (m/s²) of all N
+  vehicles.
+- ``return_info=True``: ``(group, "info")`` in every group, one float32 [B, agents] entry per
+  key of :attr:`~VDTNTorchRLEnv.info_keys`, agent i of either group being follower i and the
+  V2V link that carries its CAM (0 at a reset, ``cam_delivered`` 1):
+
+  =======================  ===============================================================
+  ``gap_error_abs_m``      |gap error| (m) of the follower in its last finished interval
+  ``speed_error_abs_mps``  |speed error| (m/s) of the follower then
+  ``collided``             1 where the follower collided then (what terminates a scenario)
+  ``cam_delivered``        1 where its CAM of that interval was delivered within it (radio
+                           modes; the mean is the CAM delivery rate)
+  ``aoi_ms``               Age of Information (ms) of the CAM content the follower holds:
+                           the interval's mean in the vehicle group, at the end of this
+                           subframe in the ``rra`` group (docs/model.md §4.8; radio modes)
+  ``v2i_throughput_mbps``  V2I throughput of the cell (Mbps, all V2I links together): the
+                           interval's mean in the vehicle group, this subframe's in the
+                           ``rra`` group (radio modes)
+  =======================  ===============================================================
+
+  In the ``rra`` and ``joint`` modes (one step = one subframe) ``closes_interval`` is 1 at the
+  step that closes an interval, and the interval entries keep the last finished interval's
+  values for the next T steps (0 before the first): their mean over the steps where
+  ``closes_interval`` is 1 is their mean over intervals (the BenchMARL task logs that one).
+  The infos are what ``PettingZooWrapper`` makes of the PettingZoo faces' ``infos`` (same
+  meaning; absolute errors here, so that means over agents stay errors).
+
+``render(mode="rgb_array")`` draws scenario 0, as the PettingZoo faces draw their one scenario
+(:func:`~vdtn_marl.envs.render.render_twin`).
+
 All scenarios share the twin's subframe clock. Scenarios finish at the closing subframe of an
 interval, where every scenario is at subframe 0 of the next one, so automatic resets keep the
 batch in step. A scenario reset explicitly in the middle of an interval (``"rra"``/``"joint"``)
@@ -55,12 +89,22 @@ from vdtn_marl.errors import ConfigError
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario
+from vdtn_marl.sim.aoi import interval_age_ms
 from vdtn_marl.sim.completion import make_completion
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator
 
 MODES = ("control", "control_impaired", "rra", "joint")
+
+#: ``(group, "info")`` keys of ``return_info=True`` in every mode (see the module doc).
+INTERVAL_INFO_KEYS = ("gap_error_abs_m", "speed_error_abs_mps", "collided")
+#: ... and in the modes whose CAMs cross the radio (all but ``"control"``).
+RADIO_INFO_KEYS = ("cam_delivered", "aoi_ms", "v2i_throughput_mbps")
+#: ... and in the modes whose one step is one subframe (``"rra"``, ``"joint"``).
+SUBFRAME_INFO_KEYS = ("closes_interval",)
+#: The ``rra`` group's entries that are of the step's subframe, not of the last interval.
+RRA_SUBFRAME_INFO_KEYS = ("aoi_ms", "v2i_throughput_mbps", "closes_interval")
 
 
 def _batch_size(batch_size: int | Sequence[int] | torch.Size) -> int:
@@ -105,6 +149,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         scenario: the world, a name of :data:`vdtn_marl.scenarios.SCENARIOS` (default
             ``"platoon"``: one platoon with predecessor following; ``"two_platoons"``: two
             platoons sharing the cell) or a :class:`~vdtn_marl.scenarios.Scenario`.
+        return_state: emit the global ``"state"`` [B, 3N] (see the module doc).
+        return_info: emit ``(group, "info")`` with the domain metrics (see the module doc).
         **model_kwargs: model parameters for
             :meth:`~vdtn_marl.sim.params.TwinParams.from_overrides` (e.g. ``num_vehicles=6``,
             ``episode_intervals=100``).
@@ -135,6 +181,8 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         burn_in_intervals: int = 0,
         scenario: str | Scenario = DEFAULT_SCENARIO,
         max_cycles: int | None = None,
+        return_state: bool = False,
+        return_info: bool = False,
         **model_kwargs,
     ):
         if mode not in MODES:
@@ -212,6 +260,15 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         self._vehicle_obs: torch.Tensor | None = None
         # the scenarios whose new episodes the last step already started (_step_interval)
         self._restarted: torch.Tensor | None = None
+        self.return_state = bool(return_state)
+        self.return_info = bool(return_info)
+        self.info_keys = (
+            INTERVAL_INFO_KEYS
+            + (RADIO_INFO_KEYS if self.impaired else ())
+            + (SUBFRAME_INFO_KEYS if self.has_rra else ())
+        )
+        self._last_info: dict[str, torch.Tensor] | None = None  # of the last closed interval
+        self._last_record = None  # the last closed interval, for render()
         self._make_specs()
 
     # ------------------------------------------------------------------ groups
@@ -246,14 +303,22 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         def done_group(shape):
             return {k: flags(shape) for k in ("done", "terminated", "truncated")}
 
+        def info(shape):
+            entry = {k: Unbounded(shape=shape, dtype=torch.float32, device=dev) for k in keys}
+            return {"info": Composite(entry, shape=shape, device=dev)} if self.return_info else {}
+
+        keys = self.info_keys
         obs, act, rew = {}, {}, {}
         done = done_group((b, 1))
+        if self.return_state:
+            n = self.twin.params.platoon.num_vehicles
+            obs["state"] = Unbounded(shape=(b, 3 * n), dtype=torch.float32, device=dev)
         if self.has_vehicles:
             group = (b, f)
             vehicle_obs = {"observation": bounded(veh_box, (b, f, veh_box.shape[0]))}
             if self.mode == "joint":
                 vehicle_obs["acts"] = flags((b, f, 1))
-            obs["vehicle"] = Composite(vehicle_obs, shape=group, device=dev)
+            obs["vehicle"] = Composite({**vehicle_obs, **info(group)}, shape=group, device=dev)
             act["vehicle"] = Composite(
                 action=Bounded(
                     low=self.accel_min_mps2,
@@ -274,7 +339,9 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         if self.has_rra:
             group = (b, n_l)
             obs["rra"] = Composite(
-                observation=bounded(rra_box, (b, n_l, rra_box.shape[0])), shape=group, device=dev
+                {"observation": bounded(rra_box, (b, n_l, rra_box.shape[0])), **info(group)},
+                shape=group,
+                device=dev,
             )
             act["rra"] = Composite(
                 action=Categorical(n=self.num_actions, shape=group, dtype=torch.long, device=dev),
@@ -407,6 +474,92 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             if bool(collided.any()):
                 engine.reset(collided)
 
+    # ------------------------------------------------------------------ state, infos, frames
+    def _state(self) -> torch.Tensor:
+        """``"state"`` [B, 3N] float32: positions (m), speeds (m/s), accelerations (m/s²)."""
+        st = self.twin.platoon
+        return torch.cat([st.position_m, st.speed_mps, st.accel_mps2], -1).to(torch.float32)
+
+    def _held_age(self) -> torch.Tensor | None:
+        """Age (intervals) of the CAM content each recipient holds at the interval's start,
+        [B, F]: read before the interval closes, for its AoI (radio modes with infos only)."""
+        if not (self.return_info and self.impaired):
+            return None
+        return self.twin.interval[:, None] - self.twin.cam_held_interval
+
+    def _reset_info(self, mask: torch.Tensor | None) -> None:
+        """The infos of a reset (all zero, ``cam_delivered`` 1) in the ``mask`` scenarios."""
+        if not self.return_info:
+            return
+        b, f = self.num_scenarios, self.num_followers
+        keys = [k for k in self.info_keys if k not in SUBFRAME_INFO_KEYS]
+        initial = {k: torch.zeros(b, f, device=self.device) for k in keys}
+        if "cam_delivered" in initial:
+            initial["cam_delivered"].fill_(1.0)
+        if mask is None or self._last_info is None:
+            self._last_info = initial
+        else:
+            rows = mask[:, None]
+            self._last_info = {
+                k: torch.where(rows, initial[k], v) for k, v in self._last_info.items()
+            }
+
+    def _close_info(self, record, held_age: torch.Tensor | None) -> None:
+        """Keep the infos of the interval ``record`` closed (and the record, for render())."""
+        self._last_record = record
+        if not self.return_info:
+            return
+        info = {
+            "gap_error_abs_m": record.gap_error_m.abs(),
+            "speed_error_abs_mps": record.speed_error_mps.abs(),
+            "collided": record.collided,
+        }
+        if self.impaired:
+            twin, f = self.twin, self.num_followers
+            t = twin.subframes_per_interval
+            delay = record.cam_delay_subframes  # link i carries follower i's CAM
+            info["cam_delivered"] = delay <= t
+            info["aoi_ms"] = interval_age_ms(held_age, delay, t, twin.subframe_ms)[0]
+            g = record.v2i_rate_bps.sum(-1) * 1e-6
+            info["v2i_throughput_mbps"] = g[:, None].expand(self.num_scenarios, f)
+        self._last_info = {k: v.to(torch.float32) for k, v in info.items()}
+
+    def _group_infos(
+        self, closing: bool = False, aoi_ms=None, v2i_mbps=None
+    ) -> dict[str, dict[str, torch.Tensor]]:
+        """``(group, "info")`` of every group; ``closing``: the step closed an interval; the
+        ``rra`` group's AoI and V2I throughput are this subframe's (``aoi_ms`` [B, L],
+        ``v2i_mbps`` [B]; 0 when not given)."""
+        if not self.return_info:
+            return {}
+        b = self.num_scenarios
+        info = dict(self._last_info)
+        if self.has_rra:
+            info["closes_interval"] = torch.full((b, 1), float(closing), device=self.device)
+
+        def entries(n: int) -> dict[str, torch.Tensor]:
+            return {k: v.to(torch.float32).expand(b, n).clone() for k, v in info.items()}
+
+        infos = {}
+        if self.has_vehicles:
+            infos["vehicle"] = entries(self.num_followers)
+        if self.has_rra:
+            zeros = torch.zeros(b, self.num_links, device=self.device)
+            info["aoi_ms"] = zeros if aoi_ms is None else aoi_ms
+            info["v2i_throughput_mbps"] = zeros if v2i_mbps is None else v2i_mbps[:, None]
+            infos["rra"] = entries(self.num_links)
+        return infos
+
+    def render(self, mode: str = "rgb_array"):
+        """An RGB frame [H, W, 3] uint8 of scenario 0 after the last step (the road, the gaps,
+        each V2V link's CAM; :func:`~vdtn_marl.envs.render.render_twin`): what BenchMARL's
+        evaluation video records, one frame per step."""
+        if mode != "rgb_array":
+            raise ConfigError(f"render(mode={mode!r}): only mode='rgb_array' is drawn")
+        from vdtn_marl.envs.render import render_twin
+
+        return render_twin(self.twin, self._last_record)
+
     # ------------------------------------------------------------------ outputs
     def _vehicle_acts(self) -> torch.Tensor:
         acts = self.twin.subframe == self.twin.subframes_per_interval - 1
@@ -415,20 +568,32 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         )
 
     def _output(
-        self, vehicle_obs, rra_obs, vehicle_reward, rra_reward, terminated, truncated
+        self,
+        vehicle_obs,
+        rra_obs,
+        vehicle_reward,
+        rra_reward,
+        terminated,
+        truncated,
+        infos: dict[str, dict[str, torch.Tensor]] | None = None,
     ) -> TensorDict:
         b, f, n_l = self.num_scenarios, self.num_followers, self.num_links
         term = terminated[:, None]
         trunc = truncated[:, None]
         done = term | trunc
         out = {"done": done, "terminated": term, "truncated": trunc}
+        infos = infos or {}
+        if self.return_state:
+            out["state"] = self._state()
 
-        def group(n, extra):
+        def group(n, extra, name):
             flags = {
                 "done": done[:, None].expand(b, n, 1).clone(),
                 "terminated": term[:, None].expand(b, n, 1).clone(),
                 "truncated": trunc[:, None].expand(b, n, 1).clone(),
             }
+            if name in infos:
+                flags["info"] = TensorDict(infos[name], batch_size=(b, n), device=self.device)
             return TensorDict({**extra, **flags}, batch_size=(b, n), device=self.device)
 
         if self.has_vehicles:
@@ -437,12 +602,12 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
                 extra["acts"] = self._vehicle_acts()
             if vehicle_reward is not None:
                 extra["reward"] = vehicle_reward.to(torch.float32)[..., None]
-            out["vehicle"] = group(f, extra)
+            out["vehicle"] = group(f, extra, "vehicle")
         if self.has_rra:
             extra = {"observation": rra_obs}
             if rra_reward is not None:
                 extra["reward"] = rra_reward.to(torch.float32)[..., None]
-            out["rra"] = group(n_l, extra)
+            out["rra"] = group(n_l, extra, "rra")
         return TensorDict(out, batch_size=(b,), device=self.device)
 
     # ------------------------------------------------------------------ reset
@@ -471,7 +636,10 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             engine.reset()  # with the first interval's radio in "control_impaired"
             if self.burn_in_intervals or self._burn_in_exact is not None:
                 self._burn_in()
+            self._last_record = None
+            self._reset_info(None)
         else:
+            self._reset_info(mask)  # also those the step that ended them started anew
             if restarted is not None:  # started by the step that ended them
                 mask = mask & ~restarted
             if bool(mask.any()):
@@ -491,7 +659,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         if self.has_rra:
             rra_obs = twin.rra_observation().clone()
         false = torch.zeros(self.num_scenarios, dtype=torch.bool, device=self.device)
-        return self._output(vehicle_obs, rra_obs, None, None, false, false)
+        return self._output(vehicle_obs, rra_obs, None, None, false, false, self._group_infos())
 
     # ------------------------------------------------------------------ step
     def _step(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -502,7 +670,9 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
 
     def _step_interval(self, tensordict: TensorDictBase) -> TensorDictBase:
         engine = self.engine
+        held_age = self._held_age()
         closed = engine.close(self._vehicle_commands(tensordict))
+        self._close_info(closed.record, held_age)
         going = closed.going
         all_going = bool(going.all())
         final_obs = None
@@ -520,7 +690,13 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         if final_obs is not None:
             obs = torch.where(going[:, None, None], obs, final_obs)
         return self._output(
-            obs, None, closed.record.reward, None, closed.terminated, closed.truncated
+            obs,
+            None,
+            closed.record.reward,
+            None,
+            closed.terminated,
+            closed.truncated,
+            self._group_infos(),
         )
 
     def _step_subframe(self, tensordict: TensorDictBase) -> TensorDictBase:
@@ -531,8 +707,9 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         commands = self._vehicle_commands(tensordict) if closing and self.has_vehicles else None
 
         engine = self.engine
-        rra_reward, _ = engine.subframe_reward(engine.step_subframe(rra_actions))
+        rra_reward, v2i_mbps = engine.subframe_reward(engine.step_subframe(rra_actions))
         rra_reward = rra_reward.to(torch.float32)
+        aoi_ms = twin.cam_age_ms() if self.return_info else None  # at this subframe's end
         b = self.num_scenarios
         terminated = torch.zeros(b, dtype=torch.bool, device=self.device)
         truncated = terminated.clone()
@@ -542,7 +719,9 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         going = None
         final_rra_obs = None
         if closing:
+            held_age = self._held_age()
             closed = engine.close(commands)
+            self._close_info(closed.record, held_age)
             rra_reward = rra_reward + closed.rra_reward.to(torch.float32)
             if vehicle_reward is not None:
                 vehicle_reward = closed.record.reward
@@ -568,4 +747,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
         rra_obs = twin.rra_observation().clone()
         if final_rra_obs is not None:
             rra_obs = torch.where(going[:, None, None], rra_obs, final_rra_obs)
-        return self._output(vehicle_obs, rra_obs, vehicle_reward, rra_reward, terminated, truncated)
+        infos = self._group_infos(bool(closing), aoi_ms, v2i_mbps)
+        return self._output(
+            vehicle_obs, rra_obs, vehicle_reward, rra_reward, terminated, truncated, infos
+        )
