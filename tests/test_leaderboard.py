@@ -1009,7 +1009,7 @@ def test_target_not_decided_with_few_seeds_or_a_wide_interval():
 
 def _fake_run(cfg: config.BenchConfig, cell, data: dict) -> None:
     k, method = cell.seed, cell.method
-    shift = {"a": 0.0, "b": 0.1, "c": 0.3}[method]
+    shift = {"a": 0.0, "b": 0.1, "c": 0.3, "d": 0.4}[method]
     summary = {key: 1.0 + shift + 0.01 * k for key in leaderboard.METRIC_KEYS}
     summary.update(
         gap_error_abs_m=0.5 * (1 + shift) + 0.02 * k,
@@ -1161,6 +1161,49 @@ def test_out_dir_of_the_definition_takes_submissions(tmp_path):
     cfg.benchmark.seeds = [0, 1, 2]
     with pytest.raises(leaderboard.LeaderboardError, match="benchmark.seeds"):
         leaderboard.check_out_dir(cfg)
+
+
+def test_a_later_submission_keeps_the_earlier_ones_in_grid_and_report(tmp_path):
+    first = _bench(methods={"a": [], "b": []}, seeds=[0, 1, 2])
+    first.submissions = {"c": ["rra=greedy"]}
+    first.out_dir, first.report_dir = str(tmp_path / "runs"), str(tmp_path / "report")
+    config.validate_benchmark(first)
+    composed = _fake_grid(first, leaderboard.plan(first))
+    (tmp_path / "runs" / leaderboard.MANIFEST_FILE).write_text(
+        json.dumps(leaderboard.manifest(first))
+    )
+    # a second job adds submission d: c, recorded in out_dir, stays beside it
+    second = _bench(methods={"a": [], "b": []}, seeds=[0, 1, 2])
+    second.submissions = {"d": ["rra=round_robin"]}
+    second.out_dir, second.report_dir = first.out_dir, first.report_dir
+    config.validate_benchmark(second)
+    merged = leaderboard.with_recorded_submissions(second)
+    assert merged.submissions == {"c": ["rra=greedy"], "d": ["rra=round_robin"]}
+    cells = leaderboard.plan(merged)
+    assert {c.method for c in cells} == {"a", "b", "c", "d"}
+    composed.update(_fake_grid(merged, [c for c in cells if c.method == "d"]))
+    written = leaderboard.write_report(merged, command="test", cells=cells, composed=composed)
+    data = _strict_json(written["json"])
+    assert list(data["statistics"]["platoon4"]) == ["a", "b", "c", "d"]
+    assert data["submissions"] == {"c": ["rra=greedy"], "d": ["rra=round_robin"]}
+    # the same name with other overrides is refused, naming it
+    second.submissions = {"c": ["rra=random"]}
+    with pytest.raises(leaderboard.LeaderboardError, match="submissions.c="):
+        leaderboard.with_recorded_submissions(second)
+
+
+def test_run_benchmark_keeps_recorded_submissions_in_the_manifest(tmp_path):
+    first = _bench()
+    first.submissions = {"c": ["rra=greedy"]}
+    first.out_dir = str(tmp_path)
+    (tmp_path / leaderboard.MANIFEST_FILE).write_text(json.dumps(leaderboard.manifest(first)))
+    second = _bench()
+    second.submissions = {"d": ["rra=round_robin"]}
+    second.out_dir, second.run, second.report, second.progress = str(tmp_path), False, False, False
+    result = leaderboard.run_benchmark(second, command="test")
+    written = json.loads((tmp_path / leaderboard.MANIFEST_FILE).read_text())
+    assert written["submissions"] == {"c": ["rra=greedy"], "d": ["rra=round_robin"]}
+    assert {c.method for c in result.pending} == {"a", "b", "c", "d"}
 
 
 def test_report_puts_a_submission_beside_the_methods(tmp_path):

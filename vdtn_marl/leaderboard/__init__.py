@@ -59,6 +59,7 @@ from vdtn_marl.leaderboard.grid import (
     compose_cell,
     manifest,
     plan,
+    with_recorded_submissions,
     with_submissions,
 )
 from vdtn_marl.leaderboard.report import (
@@ -127,6 +128,7 @@ __all__ = [
     "run_benchmark",
     "statistics",
     "t_ci",
+    "with_recorded_submissions",
     "with_submissions",
     "write_report",
 ]

@@ -6,7 +6,7 @@ benchmark).
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -190,6 +190,25 @@ def check_out_dir(cfg: BenchConfig) -> None:
             "a changed definition needs a new benchmark.version (and so a new out_dir) or "
             "another out_dir"
         )
+
+
+def with_recorded_submissions(cfg: BenchConfig) -> BenchConfig:
+    """``cfg`` with the submissions that ``out_dir``'s manifest records beside its own, so a
+    job that adds a submission (or reports) keeps the earlier ones in the grid and the report.
+    A recorded submission given again must have the same overrides."""
+    path = Path(cfg.out_dir) / MANIFEST_FILE
+    recorded = read_json(path).get("submissions", {}) if path.is_file() else {}
+    given = {k: list(v) for k, v in (cfg.submissions or {}).items()}
+    for name, overrides in recorded.items():
+        if name in given and given[name] != list(overrides):
+            raise LeaderboardError(
+                f"submissions.{name}={given[name]} but out_dir={cfg.out_dir} holds its cells "
+                f"run with {list(overrides)}; allowed: the same overrides, another name or "
+                "another out_dir"
+            )
+    if not recorded:
+        return cfg
+    return replace(cfg, submissions={**{k: list(v) for k, v in recorded.items()}, **given})
 
 
 def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:

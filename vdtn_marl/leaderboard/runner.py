@@ -19,6 +19,7 @@ from vdtn_marl.leaderboard.grid import (
     compose_cell,
     manifest,
     plan,
+    with_recorded_submissions,
 )
 from vdtn_marl.leaderboard.report import write_report
 
@@ -53,11 +54,12 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
     """
     from vdtn_marl.io.log import progress
 
+    check_out_dir(cfg)
+    cfg = with_recorded_submissions(cfg)  # earlier submissions stay in the grid and report
     cells = plan(cfg)
     wanted = set(selected_cells(cfg.cells, [c.name for c in cells]))
     mine = [c for c in cells if c.name in wanted][cfg.shard :: cfg.num_shards]
     out_dir = Path(cfg.out_dir)
-    check_out_dir(cfg)
     atomic_write_json(out_dir / MANIFEST_FILE, manifest(cfg))
     done, ran, failed = [], [], []
     with hydra_compose():
