@@ -70,9 +70,7 @@ def _error_line(err: str) -> str:
     return lines[0]
 
 
-def test_a_launch_that_loses_the_race_for_a_folder_touches_nothing(
-    live_run, monkeypatch, capsys
-):
+def test_a_launch_that_loses_the_race_for_a_folder_touches_nothing(live_run, monkeypatch, capsys):
     """Both launches found the folder free; the first holds it now and has written Hydra's
     files: the second writes none of its own (not .hydra/config.yaml, not overrides.yaml)."""
     run, holder = live_run

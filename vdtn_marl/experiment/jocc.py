@@ -71,6 +71,7 @@ from vdtn_marl.io.files import (
     EVALUATION_FILE,
     SUMMARY_FILE,
     atomic_write_json,
+    read_json,
     run_lock,
     run_outputs,
 )
@@ -734,6 +735,11 @@ class JointOptimisation:
     def _run_stages(self) -> dict[str, Any]:
         cfg = self.cfg
         resumed = cfg.resume and self.resume()
+        ended = self.run_dir / SUMMARY_FILE
+        if resumed and self.position["iteration"] >= cfg.experiment.jocc_iterations:
+            if ended.is_file():  # resume=true on a run that had ended: its results stay as they are
+                _log.info("the run had ended; %s is kept as it was", ended)
+                return read_json(ended)
         if resumed:
             self._apply_term_scales()
         began = time.perf_counter()

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import csv
 import io
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -13,6 +14,25 @@ from typing import Any
 from vdtn_marl.errors import RunFileError
 from vdtn_marl.io.files import METRICS_FILE, atomic_write_text, read_csv_rows
 from vdtn_marl.io.loggers import RunLoggers
+
+#: A cell of a table that :class:`csv.DictWriter` wrote from a number (``nan``, ``inf`` too).
+_NUMBER = re.compile(r"[-+]?(\d+\.?\d*(e[-+]?\d+)?|\.\d+(e[-+]?\d+)?|nan|inf)", re.IGNORECASE)
+_INTEGER = re.compile(r"[-+]?\d+")
+
+
+def parse_cell(text: str) -> Any:
+    """A cell of a run's table as the value that was logged: an int, a float (``nan`` too), a
+    bool, None (an empty cell: the row had no such key) or the text itself. ``str`` of each
+    gives the cell back, so a table read and rewritten is the same."""
+    if text == "":
+        return None
+    if text in ("True", "False"):
+        return text == "True"
+    if _INTEGER.fullmatch(text):
+        return int(text)
+    if _NUMBER.fullmatch(text):
+        return float(text)
+    return text
 
 
 class MetricsLog:
@@ -42,11 +62,13 @@ class MetricsLog:
         expected_rows: int | None = None,
         loggers: RunLoggers | None = None,
     ) -> MetricsLog:
-        """Re-open a run's log, keeping the rows already written. A file that is not a whole
-        CSV table, or that holds fewer than ``expected_rows`` rows (those a checkpoint
-        counted), raises :class:`RunFileError` naming it."""
+        """Re-open a run's log, keeping the rows already written (their numbers as numbers,
+        :func:`parse_cell`). A file that is not a whole CSV table, or that holds fewer than
+        ``expected_rows`` rows (those a checkpoint counted), raises :class:`RunFileError`
+        naming it."""
         path = Path(run_dir) / filename
-        rows = read_csv_rows(path) if path.exists() else []
+        text_rows = read_csv_rows(path) if path.exists() else []
+        rows = [{k: parse_cell(v) for k, v in row.items()} for row in text_rows]
         if expected_rows is not None and len(rows) < expected_rows:
             state = f"holds {len(rows)} rows" if path.exists() else "is missing"
             raise RunFileError(
