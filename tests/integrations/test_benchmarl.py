@@ -12,6 +12,7 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import vdtn_marl
@@ -192,6 +193,82 @@ def test_named_acting_parts_are_built(vb):
     assert isinstance(env.rra_policy, RoundRobinRRAPolicy)
 
 
+@benchmarl_installed
+@pytest.mark.parametrize("name", ["control", "control_impaired", "rra"])
+def test_task_hands_over_the_global_state_and_the_domain_infos(vb, name):
+    task = vb.VDTNTask[name.upper()].get_task({})
+    env = task.get_env_fun(2, task.supports_continuous_actions(), 0, "cpu")()
+    n = env.twin.params.platoon.num_vehicles
+    assert list(task.state_spec(env).keys(True, True)) == ["state"]
+    assert task.state_spec(env)["state"].shape == (3 * n,)  # unbatched, as BenchMARL reads it
+    (group,) = task.group_map(env)
+    observed = task.observation_spec(env)
+    assert list(observed.keys(True, True)) == [(group, "observation")]  # what the actors read
+    info = task.info_spec(env)
+    keys = {key[-1] for key in info.keys(True, True)}
+    assert {"gap_error_abs_m", "speed_error_abs_mps", "collided"} <= keys
+    radio = {"cam_delivered", "aoi_ms", "v2i_throughput_mbps"}
+    assert radio.issubset(keys) == (name != "control")
+    rollout = env.rollout(3, break_when_any_done=False)
+    assert set(rollout["next", group, "info"].keys()) == keys  # where BenchMARL's logger reads
+    plain = vb.VDTNTask[name.upper()].get_task({"env_kwargs": {"return_state": False}})
+    assert plain.state_spec(plain.get_env_fun(2, True, 0, "cpu")()) is None
+
+
+@benchmarl_installed
+def test_rra_interval_infos_are_logged_over_the_steps_that_close_an_interval(vb):
+    task = vb.VDTNTask.RRA.get_task({"episode_intervals": 3})
+    env = task.make_env(2, seed=0)
+    rollout = env.rollout(150, break_when_any_done=False)  # 3 intervals of 50 subframes
+    info = rollout["next", "rra", "info"]
+    closing = info["closes_interval"] > 0
+    assert int(closing.sum()) == 3 * 2 * env.num_links
+    logged = vb.VDTNClass.log_info(rollout)
+    delivered = info["cam_delivered"][closing].mean().item()
+    assert logged["collection/rra/info/cam_delivered"] == pytest.approx(delivered)
+    assert "collection/rra/info/aoi_ms" not in logged  # of each subframe: the plain mean
+    assert vb.VDTNClass.log_info(task.make_env(2, seed=0).rollout(10)) == {}  # none closed
+
+
+@benchmarl_installed
+def test_the_control_tasks_render_and_rra_says_it_does_not(vb):
+    for task in (vb.VDTNTask.CONTROL, vb.VDTNTask.CONTROL_IMPAIRED):
+        env = task.get_task({"max_cycles": 3}).make_env(2, seed=0)
+        env.rollout(2)
+        assert task.get_task({}).has_render(env)
+        frame = vb.VDTNClass.render_callback(None, env, None)  # BenchMARL's callback
+        assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    rra = vb.VDTNTask.RRA.get_task({})
+    with pytest.warns(UserWarning, match="vdtn/rra records no evaluation video.*render=false"):
+        assert not rra.has_render(rra.make_env(1, seed=0))
+
+
+@benchmarl_installed
+def test_mappos_centralised_critic_reads_the_global_state(vb, tmp_path):
+    from benchmarl.algorithms import IppoConfig, MappoConfig
+    from benchmarl.experiment import Experiment
+    from benchmarl.models.mlp import MlpConfig
+
+    def critic_inputs(algorithm, name):
+        folder = tmp_path / f"{algorithm.__name__}_{name}"
+        folder.mkdir()
+        experiment = Experiment(
+            task=vb.VDTNTask[name].get_task({}),
+            algorithm_config=algorithm.get_from_yaml(),
+            model_config=MlpConfig.get_from_yaml(),
+            critic_model_config=MlpConfig.get_from_yaml(),
+            seed=0,
+            config=_one_iteration_config(folder, frames=40),
+        )
+        (group,) = experiment.group_map
+        return experiment.losses[group].critic_network.in_keys, group
+
+    for name in ("CONTROL", "RRA"):
+        assert critic_inputs(MappoConfig, name)[0] == ["state"]
+    inputs, group = critic_inputs(IppoConfig, "CONTROL")  # a decentralised critic: its own
+    assert inputs == [(group, "observation")]
+
+
 def _one_iteration_config(folder, frames: int):
     """BenchMARL's experiment config for one on-policy iteration of ``frames`` frames in 2
     scenarios, without loggers, rendering or evaluation, saving in ``folder``."""
@@ -228,6 +305,29 @@ def test_benchmarl_trains_ippo_for_one_iteration_through_its_python_api(vb, tmp_
     )
     experiment.run()
     assert experiment.n_iters_performed == 1 and experiment.total_frames == 40
+
+
+@benchmarl_installed
+@pytest.mark.slow
+def test_benchmarl_logs_the_domain_infos_of_a_mappo_iteration(vb, tmp_path):
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment
+    from benchmarl.models.mlp import MlpConfig
+
+    config = _one_iteration_config(tmp_path, frames=40)
+    config.loggers = ["csv"]
+    experiment = Experiment(
+        task=vb.VDTNTask.CONTROL_IMPAIRED.get_task({"max_cycles": 10}),
+        algorithm_config=MappoConfig.get_from_yaml(),
+        model_config=MlpConfig.get_from_yaml(),
+        critic_model_config=MlpConfig.get_from_yaml(),
+        seed=0,
+        config=config,
+    )
+    experiment.run()
+    logged = {path.stem for path in tmp_path.rglob("*.csv")}  # "/" in a key becomes "_"
+    for key in ("gap_error_abs_m", "cam_delivered", "aoi_ms", "v2i_throughput_mbps"):
+        assert f"collection_vehicle_info_{key}" in logged, sorted(logged)
 
 
 @benchmarl_installed

@@ -36,6 +36,23 @@ What the import registers, each in the place BenchMARL reads:
 
 ``VDTNTask.CONTROL.get_from_yaml()`` reads this package's YAML (not BenchMARL's folder), and
 ``get_task({...})`` fills the keys it is not given from it.
+
+What a task hands BenchMARL besides observations and actions (the batched face built with
+``return_state=True, return_info=True``, :mod:`vdtn_marl.envs.torchrl`):
+
+- ``state_spec``: ``"state"``, the twin's global state [3N] (positions, speeds, accelerations
+  of all N vehicles, the PettingZoo faces' ``state()``). MAPPO's and MASAC's centralised
+  critics and QMIX's mixer read it instead of the group's stacked observations.
+- ``info_spec``: ``(group, "info")``, the domain metrics (|gap error|, |speed error|,
+  collisions, CAM delivery, AoI, V2I throughput), which BenchMARL logs as
+  ``collection/<group>/info/<key>``; in ``vdtn/rra`` (one step = one subframe) the interval
+  metrics are averaged over the steps that close an interval (:meth:`VDTNClass.log_info`).
+- ``has_render``: the control tasks draw scenario 0 (one frame per 50 ms step) for
+  BenchMARL's evaluation video; ``vdtn/rra`` does not (one frame per 1 ms subframe, 50 per
+  interval) and warns, once, when an experiment asks for the video.
+
+``+task.env_kwargs.return_state=false`` gives the critic of earlier versions (observations
+only), e.g. to rebuild a checkpoint trained before the state was handed over.
 """
 
 from __future__ import annotations
@@ -45,11 +62,13 @@ import dataclasses
 import importlib.util
 import sys
 import types
+import warnings
 from dataclasses import MISSING, dataclass
 from pathlib import Path
 from typing import Any
 
 from vdtn_marl.envs.registration import make, spec
+from vdtn_marl.envs.torchrl import RRA_SUBFRAME_INFO_KEYS
 from vdtn_marl.errors import ConfigError, MissingExtraError
 
 EXTRA_HINT = (
@@ -111,6 +130,17 @@ class RRATaskConfig:
     control: str = MISSING
     env_kwargs: dict[str, Any] = MISSING
 
+
+#: Tasks whose evaluation video BenchMARL records (:meth:`VDTNClass.has_render`): one frame
+#: per step, and one step of ``vdtn/rra`` is one 1 ms subframe.
+RENDERED_TASKS = ("control", "control_impaired")
+
+NO_VIDEO_WARNING = (
+    "task vdtn/rra records no evaluation video: one step is one 1 ms subframe, so an episode "
+    "of K intervals would be K x 50 frames; experiment.render=false silences this. Draw the "
+    "platoon and its links with vdtn_marl.make('vdtn/v2x-rra-v1', render_mode='rgb_array') "
+    "or a vdtn-marl run's render options (docs/integrations.md)"
+)
 
 TASK_CONFIGS: dict[str, type] = {
     "control": ControlTaskConfig,
@@ -185,7 +215,8 @@ class VDTNClass(TaskClass):
         function returns)."""
         from vdtn_marl.policies import make_control_baseline, make_rra_baseline
 
-        env = make(self.env_id, batch_size=num_envs, seed=seed, device=device, **self.env_kwargs())
+        handed_over = {"return_state": True, "return_info": True, **self.env_kwargs()}
+        env = make(self.env_id, batch_size=num_envs, seed=seed, device=device, **handed_over)
         if "rra_policy" in self.config:
             env.rra_policy = make_rra_baseline(self.config["rra_policy"], env.twin, seed)
         if "control" in self.config:
@@ -208,19 +239,70 @@ class VDTNClass(TaskClass):
         return int(self.config["episode_intervals"]) * _subframes_per_interval(env)
 
     def has_render(self, env) -> bool:
-        return False  # the batched face draws nothing; the PettingZoo faces render
+        """Whether BenchMARL's evaluation video records this task: the control tasks (scenario
+        0, one frame per control interval); ``vdtn/rra`` warns instead (BenchMARL asks only
+        when ``experiment.render`` is true)."""
+        if self.key in RENDERED_TASKS:
+            return True
+        warnings.warn(NO_VIDEO_WARNING, UserWarning, stacklevel=2)
+        return False
 
     def group_map(self, env) -> dict[str, list[str]]:
         return env.group_map
 
     def observation_spec(self, env):
-        return env.full_observation_spec_unbatched.clone()
+        """Each group's ``observation`` only (what the policies read)."""
+        spec = env.full_observation_spec_unbatched.clone()
+        for key in list(spec.keys()):
+            if key not in self.group_map(env):
+                del spec[key]  # "state": the critics' (state_spec)
+        for group in self.group_map(env):
+            for key in list(spec[group].keys()):
+                if key != "observation":
+                    del spec[group, key]
+        return spec
 
     def info_spec(self, env):
-        return None
+        """Each group's ``info`` (None for an environment built without infos)."""
+        from torchrl.data import Composite
+
+        spec = env.full_observation_spec_unbatched
+        groups = [g for g in self.group_map(env) if "info" in spec[g].keys()]
+        if not groups:
+            return None
+        return Composite(
+            {g: Composite(info=spec[g, "info"].clone(), shape=spec[g].shape) for g in groups}
+        )
 
     def state_spec(self, env):
-        return None
+        """``"state"``, the twin's global state [3N] (None for an environment built
+        without it)."""
+        from torchrl.data import Composite
+
+        spec = env.full_observation_spec_unbatched
+        if "state" not in spec.keys():
+            return None
+        return Composite(state=spec["state"].clone())
+
+    @staticmethod
+    def log_info(batch) -> dict[str, float]:
+        """For a group whose steps are subframes (``closes_interval`` in its infos): the mean of
+        each interval metric over the steps that close an interval, where it is that
+        interval's, under the key of BenchMARL's plain mean over steps (which it replaces)."""
+        logged = {}
+        following = batch.get("next", None)
+        for group, entries in following.items() if following is not None else ():
+            info = entries.get("info", None) if hasattr(entries, "keys") else None
+            if info is None or "closes_interval" not in info.keys():
+                continue
+            closing = info.get("closes_interval") > 0
+            if not bool(closing.any()):
+                continue
+            of_subframe = RRA_SUBFRAME_INFO_KEYS if group == "rra" else ("closes_interval",)
+            for key, value in info.items():
+                if key not in of_subframe:
+                    logged[f"collection/{group}/info/{key}"] = value[closing].float().mean().item()
+        return logged
 
     def action_spec(self, env):
         return env.full_action_spec_unbatched.clone()
