@@ -88,6 +88,10 @@ EVAL_FRESH_KEYS = (
     "task",
     "warm_start_cache",
 )
+#: Keys of the run's config that eval does not take either: the run's own loggers (W&B,
+#: MLflow: an eval would need their login and log into the run's project); eval's come from
+#: its command line (default: csv).
+EVAL_OWN_KEYS = ("experiment.loggers",)
 
 
 # --- help ----------------------------------------------------------------------------------
@@ -263,7 +267,7 @@ _OUTPUTS = {
 
 def _help_default(command: str, key: str) -> str:
     """A key's default for help: eval takes most keys from the checkpoint's run."""
-    if command == "eval" and key.split(".")[0] not in EVAL_FRESH_KEYS:
+    if command == "eval" and key.split(".")[0] not in EVAL_FRESH_KEYS and key not in EVAL_OWN_KEYS:
         return "the run's"
     return _fmt_default(_default_value(key))
 

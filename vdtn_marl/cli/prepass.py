@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.cli.errors import CLIError, translate
-from vdtn_marl.cli.help import EVAL_FRESH_KEYS, group_options, read_conf_yaml
+from vdtn_marl.cli.help import EVAL_FRESH_KEYS, EVAL_OWN_KEYS, group_options, read_conf_yaml
 from vdtn_marl.experiment.compose import (
     CONFIG_PACKAGE,
     checkpoint_file,
@@ -302,8 +302,10 @@ def _run_overrides(saved: dict, parsed: Sequence[Any], extra: Sequence[str]) -> 
 
     def kept(key: str) -> bool:
         top = key.split(".")[0]
-        return top not in EVAL_FRESH_KEYS and not any(
-            key == k or key.startswith(k if k.endswith(".") else f"{k}.") for k in keys
+        return (
+            top not in EVAL_FRESH_KEYS
+            and key not in EVAL_OWN_KEYS
+            and not any(key == k or key.startswith(k if k.endswith(".") else f"{k}.") for k in keys)
         )
 
     choices = [

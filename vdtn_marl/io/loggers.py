@@ -124,8 +124,20 @@ class RunLoggers:
         return list(self._loggers or [])
 
     def _open(self) -> list[Any]:
+        """Open every logger; one that cannot (W&B without a login, say) is dropped with one
+        warning line: the run goes on, its CSV tables and results are not lost."""
         if self._loggers is None:
-            self._loggers = [self._build(name) for name in self.names]
+            self._loggers = []
+            for name in self.names:
+                try:
+                    self._loggers.append(self._build(name))
+                except Exception as err:  # noqa: BLE001 - any failure of a third-party logger
+                    reason = (str(err).strip().splitlines() or [""])[0]
+                    _log.warning(
+                        "logger %s did not open (%s: %s); the run goes on without it "
+                        "(its numbers are in metrics.csv and evaluation.csv)",
+                        name, type(err).__name__, reason,
+                    )  # fmt: skip
         return self._loggers
 
     def _build(self, name: str):
