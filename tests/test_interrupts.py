@@ -165,3 +165,45 @@ def test_nested_blocks_keep_a_ctrl_c_of_the_outer_one():
                 check_interrupt()
         assert signal.getsignal(signal.SIGINT) is not before  # still the outer block's
     assert signal.getsignal(signal.SIGINT) is before and not interrupt_requested()
+
+
+# --- SIGTERM (kill, timeout, SLURM, Kubernetes) stops as Ctrl-C does --------------------------
+
+
+def test_sigterm_sets_the_flag_like_ctrl_c():
+    code = (
+        "import os, signal, time\n"
+        "from vdtn_marl.io.interrupts import graceful_interrupts, interrupt_requested\n"
+        "with graceful_interrupts(lambda: 'HINT'):\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(0.2)\n"
+        "    print('flag', interrupt_requested(), flush=True)\n"
+        "    os.kill(os.getpid(), signal.SIGTERM)\n"
+        "    time.sleep(5)\n"
+        "print('not stopped')\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=ENV, text=True, capture_output=True, timeout=60
+    )
+    assert done.returncode == 130, done.stderr
+    assert done.stdout.split() == ["flag", "True"]
+    assert "SIGTERM: stopping at the next safe point" in done.stderr
+    assert _last_line(done.stderr) == "interrupted again: stopped now; HINT"
+
+
+def test_sigterm_during_training_keeps_a_checkpoint_and_says_how_to_continue(tmp_path):
+    run = tmp_path / "run"
+    proc = _start(run, iterations=400)
+    deadline = time.monotonic() + 120
+    while not (run / "metrics.csv").is_file():  # training has begun
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1]
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=180)
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "leaked" not in err, err
+    checkpoint = run / "checkpoints" / "last.pt"
+    last = _last_line(err)
+    assert checkpoint.is_file() and f"the last checkpoint is {checkpoint}" in last, err
+    assert "continue with: " in last and "resume=true" in last, err

@@ -89,9 +89,10 @@ def _install(factory, env, policy, seed: int) -> None:
 def _serve(conn, factory, batch_size: int, actor_bytes: bytes, threads: int) -> None:
     """A worker: build the environment, then answer the trainer's messages until ``stop``.
     Ctrl-C is the trainer's to act on (it stops after its iteration and checkpoint,
-    vdtn_marl/io/interrupts.py), so the worker ignores SIGINT; it ends when the trainer's
-    process does (its pipe closes)."""
+    vdtn_marl/io/interrupts.py), so the worker ignores SIGINT, and SIGTERM (which SLURM sends
+    to every process of a job); it ends when the trainer's process does (its pipe closes)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
     try:
         torch.set_num_threads(threads)
         env = factory(batch_size)
