@@ -231,9 +231,9 @@ def test_jocc_module_rejects_a_bad_kappa1_before_writing(tmp_path, capsys):
     assert not (tmp_path / "run").exists()
 
 
-@pytest.mark.parametrize("module", ["vdtn_marl.experiment.jocc", "vdtn_marl.algos.jocc"])
+@pytest.mark.parametrize("module", ["vdtn_marl.experiment.jocc"])
 def test_python_m_jocc_keeps_its_flags(module, tmp_path):
-    """``python -m vdtn_marl.experiment.jocc`` (and its old path) still parses its flags."""
+    """``python -m vdtn_marl.experiment.jocc`` parses its flags."""
     run = tmp_path / "run"
     done = subprocess.run(
         [sys.executable, "-m", module, "--kappa1", "2", "--run-dir", str(run)],

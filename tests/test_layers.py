@@ -36,45 +36,23 @@ LAYERS = {
     "experiment": 10,
     "leaderboard": 11,
     "cli": 12,
-    # old paths of moved modules (shims for one release), on the floor of their new room
-    "runs": 1,
-    "registry": 7,
-    "results": 9,
-    "benchmarking": 9,
-    "config": 10,
-    "rollout": 12,
-    "cli_errors": 12,
-    "cli_prepass": 12,
-    "cli_help": 12,
 }
 
 #: Imports that still run up a floor, to be moved by the restructuring. The set must match
 #: exactly: a new upward import fails, and so does one that is gone but still listed.
 KNOWN_UPWARD: set[tuple[str, str]] = set()
 
-#: Modules moved to another room, kept at their old path for one release: each is the moved
-#: module itself (``sys.modules`` points the old name at it) and warns when imported.
-MOVED = {
-    "vdtn_marl.algos.jocc": "vdtn_marl.experiment.jocc",
-    "vdtn_marl.algos.api": "vdtn_marl.experiment.api",
-    "vdtn_marl.cli_help": "vdtn_marl.cli.help",
-    "vdtn_marl.cli_prepass": "vdtn_marl.cli.prepass",
-    "vdtn_marl.cli_errors": "vdtn_marl.cli.errors",
-    "vdtn_marl.config": "vdtn_marl.experiment.config",
-    "vdtn_marl.registry": "vdtn_marl.envs.registration",
-    "vdtn_marl.runs": "vdtn_marl.io",
-    "vdtn_marl.results": "vdtn_marl.reporting",
-    "vdtn_marl.benchmarking": "vdtn_marl.reporting.benchmarking",
-    "vdtn_marl.rollout": "vdtn_marl.cli.rollout",
-    "vdtn_marl.algos.baselines": "vdtn_marl.policies",
-    "vdtn_marl.algos.rra_baselines": "vdtn_marl.policies.rra",
-    "vdtn_marl.algos.control_baselines": "vdtn_marl.policies.registry",
-    "vdtn_marl.algos.mpc_oracle": "vdtn_marl.policies.mpc_oracle",
-    "vdtn_marl.algos.exact_oracle": "vdtn_marl.policies.exact_oracle",
-    "vdtn_marl.envs.policies": "vdtn_marl.policies.rra",
-    "vdtn_marl.envs.rra_reward": "vdtn_marl.core.reward",
-    "vdtn_marl.sim.cacc": "vdtn_marl.policies.cacc",
-}
+#: Old paths of modules that moved to another room before the first release: they are gone
+#: (no shims), so nothing may import them.
+GONE = (
+    "vdtn_marl.algos.jocc", "vdtn_marl.algos.api", "vdtn_marl.cli_help", "vdtn_marl.cli_prepass",
+    "vdtn_marl.cli_errors", "vdtn_marl.config", "vdtn_marl.registry", "vdtn_marl.runs",
+    "vdtn_marl.results", "vdtn_marl.benchmarking", "vdtn_marl.rollout",
+    "vdtn_marl.algos.baselines", "vdtn_marl.algos.rra_baselines",
+    "vdtn_marl.algos.control_baselines", "vdtn_marl.algos.mpc_oracle",
+    "vdtn_marl.algos.exact_oracle", "vdtn_marl.envs.policies", "vdtn_marl.envs.rra_reward",
+    "vdtn_marl.sim.cacc",
+)  # fmt: skip
 
 
 def _modules() -> dict[str, Path]:
@@ -173,14 +151,14 @@ def test_every_room_has_a_floor():
 
 
 def test_no_module_sits_beside_the_rooms():
-    """Beside the packages only ``errors``, ``_lazy`` (the packages' lazy re-exports) and the
-    old paths of moved modules are files."""
+    """Beside the packages only ``errors`` and ``_lazy`` (the packages' lazy re-exports) are
+    files."""
     top = {
         ".".join(path.relative_to(PACKAGE.parent).with_suffix("").parts)
         for path in PACKAGE.glob("*.py")
         if path.name != "__init__.py"
     }
-    assert top - set(MOVED) == {"vdtn_marl.errors", "vdtn_marl._lazy"}
+    assert top == {"vdtn_marl.errors", "vdtn_marl._lazy"}
 
 
 @pytest.mark.parametrize("module", ["vdtn_marl.errors", "vdtn_marl._lazy"])
@@ -194,7 +172,7 @@ def test_imports_run_down_the_floors(room):
     upward = {
         (module, target)
         for module, targets in graph.items()
-        if _room(module) == room and module not in MOVED
+        if _room(module) == room
         for target in targets
         if LAYERS[_room(target)] > LAYERS[room]
     }
@@ -202,16 +180,14 @@ def test_imports_run_down_the_floors(room):
     assert upward == known
 
 
-@pytest.mark.parametrize("old", sorted(MOVED))
-def test_a_moved_module_is_the_new_one_at_its_old_path_and_warns(old):
+@pytest.mark.parametrize("old", GONE)
+def test_the_old_path_of_a_moved_module_is_gone(old):
     import importlib
-    import sys
 
-    new = importlib.import_module(MOVED[old])
-    sys.modules.pop(old, None)
-    with pytest.warns(DeprecationWarning, match=MOVED[old]):
-        assert importlib.import_module(old) is new
-    assert import_graph()[old] == {MOVED[old]}  # a shim, nothing else
+    with pytest.raises(ModuleNotFoundError, match=old.rpartition(".")[2]):
+        importlib.import_module(old)
+    assert old not in import_graph()
+    assert not any(old in targets for targets in import_graph().values())
 
 
 #: packages whose ``__init__`` gives names on first use (:func:`vdtn_marl._lazy.lazy_exports`)
@@ -243,17 +219,6 @@ def test_a_lazy_package_gives_every_name_it_lists(package):
         assert getattr(module, name) is getattr(importlib.import_module(f"{package}.{home}"), name)
     with pytest.raises(AttributeError, match="nope"):
         module.nope  # noqa: B018
-
-
-def test_the_sim_package_still_gives_cacc_for_one_release():
-    import sys
-
-    from vdtn_marl import sim
-    from vdtn_marl.policies.cacc import CACCController
-
-    sys.modules.pop("vdtn_marl.sim.cacc", None)
-    with pytest.warns(DeprecationWarning, match="vdtn_marl.policies.cacc"):
-        assert sim.CACCController is CACCController
 
 
 def test_registry_entries_point_down_the_floors():

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 import torch
 
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import link
-from vdtn_marl.sim.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.platoon import PlatoonState
 from vdtn_marl.sim.snapshot import export_state, import_state

@@ -11,24 +11,14 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.errors import LeaderboardError
-
-# hydra_compose, CAM_LATENCY_KEYS, METRICS and Metric moved to vdtn_marl.experiment; they stay
-# importable from here for one release.
 from vdtn_marl.experiment.compose import (
     compose_config,
-    hydra_compose,  # noqa: F401
     job_config,
     to_run_config,
     translate,
 )
 from vdtn_marl.experiment.config import BenchConfig, BenchmarkConfig, with_submissions
-from vdtn_marl.experiment.metrics import (
-    CAM_LATENCY_KEYS,  # noqa: F401
-    METRIC_KEYS,  # noqa: F401
-    METRICS,  # noqa: F401
-    REQUIRED_METRIC_KEYS,
-    Metric,  # noqa: F401
-)
+from vdtn_marl.experiment.metrics import REQUIRED_METRIC_KEYS
 from vdtn_marl.io.files import SUMMARY_FILE, read_json
 
 MANIFEST_FILE = "benchmark.json"

@@ -45,12 +45,4 @@ __all__ = [
 ]
 
 
-_lazy_getattr, __dir__ = lazy_exports(__name__, _HOMES)
-
-
-def __getattr__(name: str):
-    if name == "CACCController":  # moved to vdtn_marl.policies; its old path warns
-        from vdtn_marl.sim.cacc import CACCController
-
-        return CACCController
-    return _lazy_getattr(name)
+__getattr__, __dir__ = lazy_exports(__name__, _HOMES)
