@@ -4,6 +4,8 @@ single-agent face (Gymnasium's env checker, and the same numbers as the PettingZ
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import warnings
 
 import gymnasium
@@ -170,3 +172,50 @@ def test_every_gymnasium_id_is_registered_with_gymnasium_too():
     assert central.register_with_gymnasium() == GYMNASIUM_IDS
     for env_id in GYMNASIUM_IDS:
         assert gymnasium.spec(env_id).kwargs == vdtn_marl.spec(env_id).kwargs
+
+
+MAKE_EVERY_GYMNASIUM_ID = """
+import sys
+{imports}
+import gymnasium
+ids = vdtn_marl.list_envs(api="gymnasium")
+for env_id in ids:
+    env = gymnasium.make(env_id, max_cycles=2)  # the plain id, no "module:" before it
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+    assert type(env.unwrapped).__name__ == "CentralControlEnv", env_id
+    assert env.spec.kwargs == {{**vdtn_marl.spec(env_id).kwargs, "max_cycles": 2}}, env_id
+print(",".join(ids))
+"""
+
+
+@pytest.mark.parametrize(
+    "imports",
+    [
+        "import vdtn_marl\nassert 'gymnasium' not in sys.modules  # not imported for this",
+        "import gymnasium\nimport vdtn_marl",
+    ],
+    ids=["vdtn_marl-first", "gymnasium-first"],
+)
+def test_gymnasium_makes_every_gymnasium_id_after_import_vdtn_marl(imports, tmp_path):
+    code = MAKE_EVERY_GYMNASIUM_ID.format(imports=imports)
+    done = subprocess.run(
+        [sys.executable, "-W", "error", "-c", code], capture_output=True, text=True, cwd=tmp_path
+    )  # a fresh interpreter: nothing registered by this one; -W error: not a warning either
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert done.stdout.strip().split(",") == GYMNASIUM_IDS
+
+
+def test_a_gymnasium_id_registered_later_reaches_gymnasium():
+    from vdtn_marl.envs import registration
+
+    env_id = "test-plugin/platoon-control-central-v0"
+    entry_point = "vdtn_marl.envs.central:CentralControlEnv"
+    try:
+        vdtn_marl.register(env_id, entry_point, api="gymnasium", impaired=True)
+        assert gymnasium.spec(env_id).kwargs == {"impaired": True}
+        vdtn_marl.register(env_id, entry_point, api="gymnasium", override=True, impaired=False)
+        assert gymnasium.spec(env_id).kwargs == {"impaired": False}
+    finally:
+        registration._REGISTRY.pop(env_id, None)
+        gymnasium.registry.pop(env_id, None)

@@ -16,10 +16,11 @@ termination        any collision; truncation after ``episode_intervals`` (``max_
 info               ``"followers"``: the PettingZoo face's per-follower infos
 =================  ==========================================================================
 
-Importing this module registers every id of the ``"gymnasium"`` API in vdtn-marl's registry
-with Gymnasium's registry too, so
-``gymnasium.make("vdtn_marl.envs.central:vdtn/platoon-control-central-v0")`` works (Gymnasium's
-``module:id`` form imports the module first); ``vdtn_marl.make(id)`` builds the same class.
+Every id of the ``"gymnasium"`` API in vdtn-marl's registry is in Gymnasium's registry too
+(:func:`~vdtn_marl.envs.registration.register_with_gymnasium`), so after ``import vdtn_marl``
+``gymnasium.make("vdtn/platoon-control-central-v0")`` works, as does the ``module:id`` form
+``gymnasium.make("vdtn_marl.envs.central:vdtn/platoon-control-central-v0")`` without it;
+``vdtn_marl.make(id)`` builds the same class.
 Keyword arguments are those of ``PlatoonControlEnv`` (model parameters, ``traces``, ``seed``,
 ``rra_policy``, ``completion``, ``render_mode="rgb_array"``).
 """
@@ -31,7 +32,7 @@ from typing import Any
 import gymnasium
 import numpy as np
 
-from vdtn_marl.envs.registration import list_envs, spec
+from vdtn_marl.envs.registration import register_with_gymnasium
 
 
 class CentralControlEnv(gymnasium.Env):
@@ -94,15 +95,4 @@ class CentralControlEnv(gymnasium.Env):
         self.multi_agent.close()
 
 
-def register_with_gymnasium() -> list[str]:
-    """Register every ``"gymnasium"``-API id of vdtn-marl's registry with Gymnasium's (those
-    not registered there yet), each with its entry point and defaults; returns the ids."""
-    ids = list_envs(api="gymnasium")
-    for env_id in ids:
-        if env_id not in gymnasium.registry:
-            env_spec = spec(env_id)
-            gymnasium.register(env_id, entry_point=env_spec.entry_point, kwargs=env_spec.kwargs)
-    return ids
-
-
-register_with_gymnasium()
+__all__ = ["CentralControlEnv", "register_with_gymnasium"]

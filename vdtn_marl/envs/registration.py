@@ -15,6 +15,12 @@ Every spec names its ``api``: ``"pettingzoo"`` (a PettingZoo ``ParallelEnv``, mo
 has a batched face, made with ``make(id, batch_size=B)`` (the TorchRL ``VDTNTorchRLEnv`` of B
 scenarios for the built-in ids), like Gymnasium's ``vector_entry_point``.
 
+The ``"gymnasium"``-API ids are registered with Gymnasium's registry too, under the same ids
+(namespace ``vdtn``), so ``gymnasium.make("vdtn/platoon-control-central-v0")`` works after
+``import vdtn_marl``, in either order of the two imports. ``import vdtn_marl`` does not import
+Gymnasium for that (it would triple the import's time): when Gymnasium is not imported yet, a
+finder on ``sys.meta_path`` registers them as soon as ``import gymnasium`` has run, and goes.
+
 Versions follow Gymnasium's rule: an environment whose default dynamics change gets a new
 ``-vN``, and :func:`make` (and :func:`spec`) of the id it supersedes raises a
 :class:`DeprecatedEnvError` that names the new id, what changed and how to get the old
@@ -26,7 +32,10 @@ from __future__ import annotations
 
 import difflib
 import importlib
+import importlib.abc
+import importlib.util
 import re
+import sys
 import threading
 import warnings
 from collections.abc import Callable
@@ -46,6 +55,7 @@ __all__ = [
     "list_envs",
     "make",
     "register",
+    "register_with_gymnasium",
     "spec",
 ]
 
@@ -159,6 +169,7 @@ _REGISTRY: dict[str, EnvSpec] = {}
 _SUPERSEDED: dict[str, _Superseded] = {}
 _PLUGINS_LOADED = False
 _PLUGIN_LOCK = threading.RLock()
+_GYMNASIUM_SYNCED = False  # whether register() also registers "gymnasium" ids with Gymnasium
 
 
 def register(
@@ -219,6 +230,8 @@ def register(
         vector_kwargs=dict(vector_kwargs or {}),
     )
     _REGISTRY[env_id] = env_spec
+    if api == "gymnasium" and _GYMNASIUM_SYNCED:  # e.g. a plugin loaded after Gymnasium
+        _to_gymnasium(env_spec, replace=override)
     return env_spec
 
 
@@ -311,6 +324,82 @@ def _load_plugins() -> None:
                     PluginLoadWarning,
                     stacklevel=3,
                 )
+
+
+# --- Gymnasium's registry ------------------------------------------------------------------
+def _to_gymnasium(env_spec: EnvSpec, replace: bool = False) -> None:
+    import gymnasium
+
+    if replace:
+        gymnasium.registry.pop(env_spec.id, None)
+    if env_spec.id not in gymnasium.registry:
+        gymnasium.register(env_spec.id, entry_point=env_spec.entry_point, kwargs=env_spec.kwargs)
+
+
+def register_with_gymnasium() -> list[str]:
+    """Register every ``"gymnasium"``-API id of this registry (plugins' included) with
+    Gymnasium's, each with its entry point and defaults (an id Gymnasium already has is left as
+    it is); ids registered later follow. Imports Gymnasium; returns the ids."""
+    global _GYMNASIUM_SYNCED
+    ids = list_envs(api="gymnasium")
+    for env_id in ids:
+        _to_gymnasium(_REGISTRY[env_id])
+    _GYMNASIUM_SYNCED = True
+    return ids
+
+
+class _ThenRegister(importlib.abc.Loader):
+    """Gymnasium's own loader, then :func:`register_with_gymnasium` (see the module doc)."""
+
+    def __init__(self, loader, finder: _WhenGymnasiumLoads):
+        self.loader, self.finder = loader, finder
+
+    def create_module(self, module_spec):
+        return self.loader.create_module(module_spec)
+
+    def exec_module(self, module) -> None:
+        module.__loader__ = module.__spec__.loader = self.loader  # as if we were not there
+        self.loader.exec_module(module)
+        if self.finder in sys.meta_path:
+            sys.meta_path.remove(self.finder)
+        try:
+            register_with_gymnasium()
+        except Exception as exc:  # never make `import gymnasium` fail
+            warnings.warn(
+                f"vdtn-marl could not register its Gymnasium ids with Gymnasium: "
+                f"{type(exc).__name__}: {exc}; use gymnasium.make('vdtn_marl.envs.central:<id>')",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+
+
+class _WhenGymnasiumLoads(importlib.abc.MetaPathFinder):
+    """Finds nothing itself: hands ``import gymnasium`` the spec the other finders find, with a
+    loader that registers vdtn-marl's Gymnasium ids once Gymnasium has run."""
+
+    def __init__(self):
+        self._finding = False
+
+    def find_spec(self, fullname, path=None, target=None):
+        if fullname != "gymnasium" or self._finding:
+            return None
+        self._finding = True
+        try:
+            found = importlib.util.find_spec(fullname)
+        finally:
+            self._finding = False
+        if found is None or not hasattr(found.loader, "exec_module"):
+            return None
+        found.loader = _ThenRegister(found.loader, self)
+        return found
+
+
+def _sync_with_gymnasium() -> None:
+    """Register the Gymnasium ids with Gymnasium now if it is imported, else when it is."""
+    if "gymnasium" in sys.modules:
+        register_with_gymnasium()
+    elif not any(isinstance(f, _WhenGymnasiumLoads) for f in sys.meta_path):
+        sys.meta_path.insert(0, _WhenGymnasiumLoads())
 
 
 def _reset_plugins_for_tests() -> None:
@@ -441,3 +530,5 @@ VERSION_CHANGES: dict[str, tuple[str, ...]] = {
 """Changes of each built-in id against its previous version (what DeprecatedEnvError says)."""
 for _new_id, _changes in VERSION_CHANGES.items():
     _supersede(_new_id.removesuffix("-v1") + "-v0", _new_id, _changes, V0_CHANNEL_HINT)
+
+_sync_with_gymnasium()  # last: every built-in id is registered
