@@ -102,6 +102,8 @@ def distill_teacher(
     exploration_std_mps2: float = 0.1,
     trace_source=None,
     progress: Callable[[int], None] | None = None,
+    state: dict | None = None,
+    on_state: Callable[[dict], None] | None = None,
 ) -> DistillationStats:
     """Fit ``trainer``'s vehicle actor to ``teacher`` on perfect observations (see module doc).
 
@@ -118,6 +120,11 @@ def distill_teacher(
         exploration_std_mps2: std (m/s²) of the noise on the teacher's commands in round 0.
         trace_source: the leader traces (default: the model's).
         progress: called with 1 after every simulated interval and every 100 fit steps.
+        on_state: called after each round's rollouts and after its fit with the distillation's
+            state so far (samples, optimiser, random generator; ``trainer`` holds the actor):
+            a caller keeps it with the trainer's state, in a checkpoint.
+        state: such a state, with ``trainer`` restored to the same moment: the distillation
+            goes on from there, as if it had not stopped.
     """
     if trainer.group != "vehicle":
         raise ValueError(f"distillation trains the 'vehicle' group, not {trainer.group!r}")
@@ -128,8 +135,6 @@ def distill_teacher(
     tick = progress or (lambda n: None)
     if not trainer.scaling_fitted:
         trainer.fit_observation_scaling()
-    pp = params.platoon
-    low, high = pp.accel_min_mps2, pp.accel_max_mps2
     device = trainer.device
     student = ActorPolicy(trainer.actor, "vehicle")
     generator = torch.Generator(device=device).manual_seed(trainer.seed)
@@ -137,36 +142,32 @@ def distill_teacher(
     optimizer = torch.optim.Adam(trainer.actor.parameters(), lr=lr)
     observations: list[torch.Tensor] = []
     labels: list[torch.Tensor] = []
-    for r in range(rounds):
-        seed = trainer.seed_for(DISTILLATION_ITERATION - r)
-        twin = DigitalTwin(
-            params, batch_size=scenarios, device=device, seed=seed, radio=False,
-            trace_source=trace_source, backend="torch",
-        )  # fmt: skip
-        twin.reset(seed=seed)
-        if hasattr(teacher, "reset"):
-            teacher.reset()
-        engine = IntervalEngine(twin, perfect=True)
-        alive = torch.ones(scenarios, dtype=torch.bool, device=device)
-        for k in range(intervals):
-            if k > 0:
-                engine.advance()
-            observation = engine.observe()
-            with torch.no_grad():
-                label = teacher(twin).to(observation.dtype)
-                if r == 0:
-                    noise = torch.randn(
-                        label.shape, generator=generator, device=device, dtype=label.dtype
-                    )
-                    act = label + exploration_std_mps2 * noise
-                else:
-                    act = student(observation).to(label.dtype)
-            observations.append(observation[alive])  # a collided scenario teaches nothing
-            labels.append(label[alive])
-            alive &= ~engine.close(act.clamp(low, high)).terminated
-            tick(1)
-        data_x = torch.cat(observations)
-        data_y = torch.cat(labels)
+    first_round, collected = 0, False
+    if state is not None:
+        optimizer.load_state_dict(state["optimizer"])
+        generator.set_state(state["generator"])
+        observations, labels = [state["observations"]], [state["labels"]]
+        first_round = state["round"] + int(state["fitted"])
+        collected = not state["fitted"]
+        began -= state["seconds"]
+
+    def keep(r: int, fitted: bool) -> None:
+        if on_state is not None:
+            on_state({
+                "round": r, "fitted": fitted, "seconds": time.perf_counter() - began,
+                "observations": torch.cat(observations), "labels": torch.cat(labels),
+                "optimizer": optimizer.state_dict(), "generator": generator.get_state(),
+            })  # fmt: skip
+
+    for r in range(first_round, rounds):
+        if collected and r == first_round:
+            data_x, data_y = observations[0], labels[0]
+        else:
+            data_x, data_y = _collect_round(
+                trainer, teacher, params, r, scenarios, intervals, exploration_std_mps2,
+                trace_source, generator, student, observations, labels, tick,
+            )  # fmt: skip
+            keep(r, fitted=False)
         for step in range(fit_steps):
             index = torch.randint(
                 0, data_x.shape[0], (min(minibatch_size, data_x.shape[0]),),
@@ -178,6 +179,8 @@ def distill_teacher(
             optimizer.step()
             if (step + 1) % 100 == 0:
                 tick(1)
+        if r + 1 < rounds:
+            keep(r, fitted=True)
     with torch.no_grad():
         rms = float((student(data_x) - data_y).pow(2).mean().sqrt())
     return DistillationStats(
@@ -186,6 +189,45 @@ def distill_teacher(
         rms_error_mps2=rms,
         seconds=time.perf_counter() - began,
     )
+
+
+def _collect_round(
+    trainer, teacher, params, r, scenarios, intervals, exploration_std_mps2, trace_source,
+    generator, student, observations, labels, tick,
+) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """Round ``r`` of :func:`distill_teacher`: its scenarios' observations and the teacher's
+    labels, appended to ``observations`` and ``labels``; returns all of them so far."""
+    pp = params.platoon
+    low, high = pp.accel_min_mps2, pp.accel_max_mps2
+    device = trainer.device
+    seed = trainer.seed_for(DISTILLATION_ITERATION - r)
+    twin = DigitalTwin(
+        params, batch_size=scenarios, device=device, seed=seed, radio=False,
+        trace_source=trace_source, backend="torch",
+    )  # fmt: skip
+    twin.reset(seed=seed)
+    if hasattr(teacher, "reset"):
+        teacher.reset()
+    engine = IntervalEngine(twin, perfect=True)
+    alive = torch.ones(scenarios, dtype=torch.bool, device=device)
+    for k in range(intervals):
+        if k > 0:
+            engine.advance()
+        observation = engine.observe()
+        with torch.no_grad():
+            label = teacher(twin).to(observation.dtype)
+            if r == 0:
+                noise = torch.randn(
+                    label.shape, generator=generator, device=device, dtype=label.dtype
+                )
+                act = label + exploration_std_mps2 * noise
+            else:
+                act = student(observation).to(label.dtype)
+        observations.append(observation[alive])  # a collided scenario teaches nothing
+        labels.append(label[alive])
+        alive &= ~engine.close(act.clamp(low, high)).terminated
+        tick(1)
+    return torch.cat(observations), torch.cat(labels)
 
 
 #: ``seed_for`` offset of the first RRA distillation round's scenarios (later rounds count down

@@ -598,7 +598,12 @@ class JointOptimisation:
             return
         intervals = min(200, self.params.episode_intervals)
         memo_dir, key = cfg.warm_start_cache, None
-        if memo_dir:
+        # an interrupted warm start's state, from the checkpoint written after each of its
+        # rounds' rollouts and fits: it goes on from there
+        partial = self.position.pop("warm_start_partial", None)
+        if partial is not None:
+            key = partial.pop("memo_key")
+        elif memo_dir:
             key = warm_start.memo_key(
                 trainer=self.pi_star.state_dict(),
                 trainer_seed=self.pi_star.seed,
@@ -619,6 +624,11 @@ class JointOptimisation:
                 return
         teacher = make_control_baseline("causal_mpc", self.params)
         ticks = distillation_ticks(intervals=intervals)
+
+        def keep(state: dict) -> None:
+            self.position["warm_start_partial"] = {**state, "memo_key": key}
+            self.save()
+
         with progress(ticks, "π* imitating the causal MPC", cfg.progress) as bar:
             stats = distill_teacher(
                 self.pi_star,
@@ -627,9 +637,12 @@ class JointOptimisation:
                 intervals=intervals,
                 trace_source=self.train_traces,
                 progress=lambda n: (check_interrupt(), bar.update(n)),
+                state=partial,
+                on_state=keep,
             )
+        self.position.pop("warm_start_partial", None)
         self.position["warm_start"] = {"teacher": cfg.control.warm_start, **asdict(stats)}
-        if key is not None:
+        if key is not None and memo_dir:
             warm_start.store(
                 memo_dir, key, self.pi_star.state_dict(), rng_state(), self.position["warm_start"]
             )
