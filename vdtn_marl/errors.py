@@ -43,6 +43,16 @@ class RunWriteError(OSError):
     if any, is intact. The message names the file and the cause."""
 
 
+class PolicyError(RuntimeError):
+    """A policy of the user's own (``rra.policy``, ``control.policy``) that raised, or returned
+    what the run cannot use, during a run; the message names the policy, the call and the
+    problem (``problem``: the problem alone, with the allowed values)."""
+
+    def __init__(self, message: str, problem: str = "") -> None:
+        super().__init__(message)
+        self.problem = problem or message
+
+
 class UnknownEnvError(KeyError):
     """Raised for an id that is not registered; the message lists the known ids."""
 

@@ -261,7 +261,7 @@ def run_job(command: str, cfg: Any) -> dict:
     from omegaconf import OmegaConf
 
     from vdtn_marl.algos.checkpoint import CheckpointError
-    from vdtn_marl.errors import RunFileError, RunWriteError
+    from vdtn_marl.errors import PolicyError, RunFileError, RunWriteError
     from vdtn_marl.experiment import api
     from vdtn_marl.experiment.reference import REFERENCE_WARNING, row_problems
     from vdtn_marl.io.files import CONFIG_FILE, atomic_write_text, run_lock
@@ -293,6 +293,10 @@ def run_job(command: str, cfg: Any) -> dict:
     except RunWriteError as exc:  # a full disk, say: every file is whole (io/files.py)
         hint = interrupted_message(command, run_dir).removeprefix("interrupted; ")
         print(f"error: {exc.strerror}; {hint}", file=sys.stderr)
+        raise SystemExit(1) from None
+    except PolicyError as exc:  # the user's policy failed during the run: it names the call
+        hint = interrupted_message(command, run_dir).removeprefix("interrupted; ")
+        print(f"error: {exc}; {hint}", file=sys.stderr)
         raise SystemExit(1) from None
     problems = row_problems(summary) if isinstance(summary, dict) else ""
     if HydraConfig.get().mode == RunMode.MULTIRUN:

@@ -95,14 +95,15 @@ def to_run_config(data: dict, command: str = "jocc") -> Any:
 
 
 def _build_user_policies(run_cfg: Any) -> None:
-    """``rra=policy``, ``control=policy`` by import path: the factory runs once here, so that
-    one that fails is one line before anything is written (a checkpoint's kind is checked by
-    :func:`~vdtn_marl.experiment.config.validate`)."""
-    from vdtn_marl.experiment.user_policy import is_import_path, load_policy
+    """``rra=policy``, ``control=policy``: the policy is built and called once on an observation
+    of the run's model here (:func:`~vdtn_marl.experiment.user_policy.probe_policy`), so that
+    one that fails, is of the other task or for another number of agents, or returns what the
+    run cannot use is one line before anything is written."""
+    from vdtn_marl.experiment.user_policy import probe_policy
 
     for key, section in (("control.policy", run_cfg.control), ("rra.policy", run_cfg.rra)):
-        if section.name == "policy" and is_import_path(section.policy):
-            load_policy(key, section.policy, run_cfg.twin_params(), run_cfg.seed)
+        if section.name == "policy":
+            probe_policy(key, section.policy, run_cfg.twin_params(), run_cfg.seed)
 
 
 def _check_checkpoint(run_cfg: Any, command: str) -> None:

@@ -27,21 +27,32 @@ A policy is named by one of:
   (``Experiment.reload_from_file``) and its policy acts deterministically.
 
 :func:`check_policy` runs at validation (before anything is written): it resolves an import
-path (the factory exists and is callable) and reads a checkpoint far enough to know its kind.
-:func:`load_policy` builds the policy for a run.
+path (the factory exists and is callable) and reads a checkpoint far enough to know its kind;
+:func:`probe_policy` then builds the policy and calls it once on an observation of the run's
+model: a TensorDict module must read its group's observation (an RRA policy is not a control
+policy) and have the run's number of agents, and the output must be a tensor of shape ``[B, L]``
+(``[B, F]``), integers in ``[0, M·P)`` for RRA actions, finite commands within the platoon's
+acceleration limits for control. :func:`load_policy` builds the policy for a run, as a
+:class:`CheckedPolicy`: a call that raises or returns what the run cannot use is a
+:class:`~vdtn_marl.errors.PolicyError` naming the policy and the call (shape and dtype are
+checked on every call, and a control policy's values too (it acts once per interval); an RRA
+policy acts every subframe, and its values are checked on its first :data:`CHECKED_CALLS`
+calls, after which the twin still refuses an action out of range, without the policy's name).
 """
 
 from __future__ import annotations
 
+import functools
 import importlib
 import importlib.util
 import os
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.errors import ConfigError
+from vdtn_marl.errors import ConfigError, PolicyError
 
 #: config key → (the group whose observations the policy reads, what it is)
 POLICY_KEYS: dict[str, tuple[str, str]] = {
@@ -50,6 +61,13 @@ POLICY_KEYS: dict[str, tuple[str, str]] = {
 }
 #: the kinds of checkpoint a ``.pt`` file may be (``vdtn`` is a vdtn-marl run's own)
 CHECKPOINT_KINDS = ("module", "benchmarl", "vdtn")
+#: an RRA policy's actions (called every subframe) are checked for range on its first
+#: CHECKED_CALLS calls (20 intervals of 50 subframes), their shape and dtype on every call
+CHECKED_CALLS = 1000
+#: how far a command may pass the acceleration limits (float32 rounding of the limits), m/s²
+ACCEL_TOLERANCE_MPS2 = 1e-5
+#: the scenarios of the observation a policy is called on at validation
+PROBE_SCENARIOS = 2
 _FORMS = (
     "an import path module:factory or file.py:factory, a TorchRL module checkpoint (.pt of "
     "torch.save(module)) or a BenchMARL checkpoint"
@@ -207,20 +225,19 @@ def _benchmarl_config(key: str, path: Path) -> Path:
 
 class ModulePolicy:
     """A plain ``torch.nn.Module`` as a policy: observations → actions, without gradients, on
-    the module's device; discrete actions (RRA) as integers."""
+    the module's device. Discrete actions (RRA) may come as floats holding whole numbers: its
+    :class:`CheckedPolicy` checks them and makes them integers (``whole_floats``)."""
 
     def __init__(self, module, discrete: bool):
         self.module = module.eval()
         self.discrete = discrete
+        self.whole_floats = discrete
 
     def __call__(self, observation):
         import torch
 
         with torch.no_grad():
-            action = self.module(torch.as_tensor(observation, dtype=torch.float32))
-        if self.discrete:
-            action = action.long()
-        return action
+            return self.module(torch.as_tensor(observation, dtype=torch.float32))
 
 
 def load_policy(key: str, spec: str, params, seed: int, device: Any = "cpu") -> Callable:
@@ -241,11 +258,32 @@ def load_policy(key: str, spec: str, params, seed: int, device: Any = "cpu") -> 
                 f"{key}={spec!r}: the factory returned a {type(policy).__name__}, not a "
                 f"callable policy ({expects})"
             )
-        return policy
+        return CheckedPolicy(policy, OutputCheck.of(key, spec, params))
     kind, content = _policy_file(key, spec, device)
     if kind == "benchmarl":
         content = benchmarl_policy(key, Path(spec), device)  # a TensorDict module
-    return module_policy(content, group)
+    _check_group(key, spec, content)
+    policy = module_policy(content, group)
+    whole_floats = getattr(policy, "whole_floats", False)
+    return CheckedPolicy(policy, OutputCheck.of(key, spec, params, whole_floats))
+
+
+def _check_group(key: str, spec: str, module) -> None:
+    """A TensorDict module reads its group's observation: a control policy (``vehicle``) is
+    not an RRA policy, nor the other way round."""
+    in_keys = list(getattr(module, "in_keys", None) or [])
+    if not in_keys or not hasattr(module, "out_keys"):  # a plain module: its output tells
+        return
+    group, expects = POLICY_KEYS[key]
+    if (group, "observation") in in_keys:
+        return
+    kinds = {"rra": "an RRA policy", "vehicle": "a control policy"}
+    other = next((g for g in kinds if (g, "observation") in in_keys), None)
+    what = kinds[other] if other else "a policy of neither group"
+    raise ConfigError(
+        f"{key}={spec!r} reads {in_keys}: it is {what}; allowed for {key}: a policy reading "
+        f"{(group, 'observation')}, {expects}"
+    )
 
 
 def module_policy(module, group: str) -> Callable:
@@ -288,3 +326,197 @@ def benchmarl_policy(key: str, path: Path, device: Any = "cpu"):
                 f"({type(exc).__name__}: {exc})"
             ) from exc
     return experiment.policy
+
+
+@dataclass(frozen=True)
+class OutputCheck:
+    """What a policy for ``key`` must return on observations ``[B, n, D]`` of the run's model:
+    a tensor (or array) ``[B, n]``; RRA actions integers in ``[0, M·P)`` (``whole_floats``:
+    floats holding whole numbers too, a plain module's), control commands finite and within
+    the platoon's acceleration limits."""
+
+    key: str
+    spec: str
+    num_actions: int
+    num_subchannels: int
+    num_power_levels: int
+    accel_min_mps2: float
+    accel_max_mps2: float
+    whole_floats: bool = False
+
+    @classmethod
+    def of(cls, key: str, spec: str, params, whole_floats: bool = False) -> OutputCheck:
+        radio, platoon = params.radio, params.platoon
+        return cls(
+            key, spec, int(radio.num_actions), int(radio.num_subchannels),
+            int(radio.num_power_levels), float(platoon.accel_min_mps2),
+            float(platoon.accel_max_mps2), whole_floats,
+        )  # fmt: skip
+
+    @property
+    def rra(self) -> bool:
+        return self.key == "rra.policy"
+
+    @property
+    def allowed(self) -> str:
+        """The allowed values, as a message ends with them."""
+        if self.rra:
+            return (
+                f"allowed: integer actions in [0, {self.num_actions - 1}] (sub-channel × power "
+                f"level, {self.num_subchannels} × {self.num_power_levels})"
+            )
+        return (
+            f"allowed: finite commands in [{self.accel_min_mps2:g}, {self.accel_max_mps2:g}] "
+            "m/s² (the platoon's acceleration limits)"
+        )
+
+    def problem(self, observation, output, values: bool = True) -> str | None:
+        """What is wrong with ``output`` for ``observation`` (None: nothing); ``values``: also
+        the values (range, finite: a few tensor operations, which wait for an accelerator)."""
+        import torch
+
+        what = "actions" if self.rra else "commands"
+        if not isinstance(output, torch.Tensor):
+            try:
+                output = torch.as_tensor(output)
+            except Exception:
+                return f"returned a {type(output).__name__}; {self.allowed}, a tensor [B, n]"
+        expected = observation.shape[:-1]
+        if output.shape != expected:
+            per = "link" if self.rra else "follower"
+            return (
+                f"returned {what} of shape {tuple(output.shape)}; allowed: shape "
+                f"{tuple(expected)}, one per {per} of the observation {list(observation.shape)}"
+            )
+        if output.dtype not in _dtypes(self.rra, self.whole_floats):
+            return f"returned {what} of dtype {output.dtype}; {self.allowed}"
+        floating = output.is_floating_point()
+        if not values:
+            return None
+        if self.rra:
+            low_ok, high_ok = 0, self.num_actions - 1
+        else:
+            low_ok = self.accel_min_mps2 - ACCEL_TOLERANCE_MPS2
+            high_ok = self.accel_max_mps2 + ACCEL_TOLERANCE_MPS2
+        low, high = (float(v) for v in torch.aminmax(output))  # a NaN gives NaN: refused
+        whole = not (self.rra and floating) or bool((output == output.round()).all())
+        if low_ok <= low and high <= high_ok and whole:
+            return None
+        bad = ~((output >= low_ok) & (output <= high_ok))
+        if self.rra and floating:
+            bad = bad | (output != output.round())
+        shown = ", ".join(f"{v:g}" for v in output[bad].flatten()[:4].tolist())
+        count = f"{int(bad.sum())} of {bad.numel()}"
+        return f"returned {what} such as {shown} ({count}); {self.allowed}"
+
+
+@functools.cache
+def _dtypes(rra: bool, whole_floats: bool) -> frozenset:
+    """The dtypes a policy's output may have: integers for RRA actions (floats too with
+    ``whole_floats``), integers or floats for control commands."""
+    import torch
+
+    integers = {torch.uint8, torch.int8, torch.int16, torch.int32, torch.int64}
+    floats = {torch.float16, torch.bfloat16, torch.float32, torch.float64}
+    return frozenset(integers | floats if not rra or whole_floats else integers)
+
+
+class CheckedPolicy:
+    """A user's policy that says which it is when a call fails: a call that raises, or returns
+    what :class:`OutputCheck` refuses, is a :class:`~vdtn_marl.errors.PolicyError` naming the
+    policy and the call. Shape and dtype are checked on every call, and so are a control
+    policy's values; an RRA policy's values on its first :data:`CHECKED_CALLS`. The policy's
+    own attributes (``seed``, ``rowwise``, ...) are the wrapper's; what ``bind(twin)`` and
+    ``bound()`` return is checked too, counting the same calls."""
+
+    def __init__(self, policy, check: OutputCheck, calls: list[int] | None = None):
+        self.policy = policy
+        self.check = check
+        self.calls = calls if calls is not None else [0]  # shared with bind()'s and bound()'s
+
+    def __call__(self, observation):
+        self.calls[0] += 1
+        call = self.calls[0]
+        try:
+            output = self.policy(observation)
+        except Exception as exc:
+            self._fail(call, observation, f"raised {type(exc).__name__}: {exc}", exc)
+        # a control policy acts once per interval: its values are checked on every call
+        values = call <= CHECKED_CALLS or not self.check.rra
+        problem = self.check.problem(observation, output, values)
+        if problem is not None:
+            self._fail(call, observation, problem)
+        if self.check.whole_floats:
+            import torch
+
+            output = torch.as_tensor(output).long()
+        return output
+
+    def _fail(self, call: int, observation, problem: str, cause=None):
+        shape = list(getattr(observation, "shape", ()))
+        message = f"{self.check.key}={self.check.spec!r} failed on call {call} (observation "
+        raise PolicyError(f"{message}{shape}): it {problem}", problem) from cause
+
+    def __getattr__(self, name: str):
+        policy = self.__dict__.get("policy")
+        if name.startswith("__") or policy is None:
+            raise AttributeError(name)
+        attr = getattr(policy, name)
+        if name in ("bind", "bound") and callable(attr):
+
+            def checked(*args, **kwargs):
+                return CheckedPolicy(attr(*args, **kwargs), self.check, self.calls)
+
+            return checked
+        return attr
+
+
+def probe_policy(key: str, spec: str, params, seed: int) -> None:
+    """Build the policy ``spec`` names for ``key`` and call it once on an observation of the
+    run's model (:data:`PROBE_SCENARIOS` scenarios of a twin of ``params``, on the CPU): a
+    :class:`ConfigError` naming the policy, the problem and the allowed values if it cannot
+    act in the run (see the module doc)."""
+    from vdtn_marl.sim.twin import DigitalTwin
+
+    policy = load_policy(key, spec, params, seed)
+    twin = DigitalTwin(params, batch_size=PROBE_SCENARIOS, seed=seed, draw_ahead=False)
+    twin.reset(seed=seed)
+    if key == "rra.policy":
+        observation = twin.rra_observation().clone()
+        agents = f"{twin.num_links} links"
+    else:
+        observation = twin.vehicle_observation(perfect=False)
+        agents = f"{twin.num_followers} followers"
+    where = (
+        f"{key}={spec!r}, called once on an observation {list(observation.shape)} of the run "
+        f"(scenario.num_vehicles={params.platoon.num_vehicles}: {agents})"
+    )
+    built_for = _agents_of(policy.policy)
+    if built_for is not None and built_for != observation.shape[-2]:
+        raise ConfigError(
+            f"{where}: it was built for {built_for} agents; allowed: a policy for "
+            f"{observation.shape[-2]} agents, {agents}"
+        )
+    if hasattr(policy, "bind"):
+        policy = policy.bind(twin)
+    if hasattr(policy, "seed"):
+        policy.seed(seed)
+    try:
+        policy(observation)
+    except PolicyError as exc:
+        raise ConfigError(f"{where}: it {exc.problem}") from exc
+
+
+def _agents_of(policy) -> int | None:
+    """The number of agents the networks of a module policy were built for (TorchRL's and
+    BenchMARL's multi-agent networks say it: ``n_agents``), None if none says."""
+    import torch
+
+    module = getattr(policy, "actor", None) or getattr(policy, "module", None)
+    if not isinstance(module, torch.nn.Module):
+        return None
+    for part in module.modules():
+        n_agents = getattr(part, "n_agents", None)
+        if isinstance(n_agents, int) and not isinstance(n_agents, bool):
+            return n_agents
+    return None
