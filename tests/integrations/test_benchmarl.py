@@ -239,7 +239,7 @@ def test_the_control_tasks_render_and_rra_says_it_does_not(vb):
         frame = vb.VDTNClass.render_callback(None, env, None)  # BenchMARL's callback
         assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
     rra = vb.VDTNTask.RRA.get_task({})
-    with pytest.warns(UserWarning, match="vdtn/rra records no evaluation video.*render=false"):
+    with pytest.warns(UserWarning, match="vdtn/rra records no evaluation video.*render_mode"):
         assert not rra.has_render(rra.make_env(1, seed=0))
 
 

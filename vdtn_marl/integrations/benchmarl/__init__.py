@@ -49,7 +49,7 @@ What a task hands BenchMARL besides observations and actions (the batched face b
   metrics are averaged over the steps that close an interval (:meth:`VDTNClass.log_info`).
 - ``has_render``: the control tasks draw scenario 0 (one frame per 50 ms step) for
   BenchMARL's evaluation video; ``vdtn/rra`` does not (one frame per 1 ms subframe, 50 per
-  interval) and warns, once, when an experiment asks for the video.
+  interval) and says so in a warning at the first evaluation.
 
 ``+task.env_kwargs.return_state=false`` gives the critic of earlier versions (observations
 only), e.g. to rebuild a checkpoint trained before the state was handed over.
@@ -136,10 +136,10 @@ class RRATaskConfig:
 RENDERED_TASKS = ("control", "control_impaired")
 
 NO_VIDEO_WARNING = (
-    "task vdtn/rra records no evaluation video: one step is one 1 ms subframe, so an episode "
-    "of K intervals would be K x 50 frames; experiment.render=false silences this. Draw the "
-    "platoon and its links with vdtn_marl.make('vdtn/v2x-rra-v1', render_mode='rgb_array') "
-    "or a vdtn-marl run's render options (docs/integrations.md)"
+    "task vdtn/rra records no evaluation video, whatever experiment.render says: one step is "
+    "one 1 ms subframe, so an episode of K intervals would be K x 50 frames. Draw the platoon "
+    "and its links with vdtn_marl.make('vdtn/v2x-rra-v1', render_mode='rgb_array') "
+    "(docs/integrations.md)"
 )
 
 TASK_CONFIGS: dict[str, type] = {
@@ -240,8 +240,8 @@ class VDTNClass(TaskClass):
 
     def has_render(self, env) -> bool:
         """Whether BenchMARL's evaluation video records this task: the control tasks (scenario
-        0, one frame per control interval); ``vdtn/rra`` warns instead (BenchMARL asks only
-        when ``experiment.render`` is true)."""
+        0, one frame per control interval); ``vdtn/rra`` warns instead (BenchMARL asks at
+        every evaluation, before it reads ``experiment.render``: once per process)."""
         if self.key in RENDERED_TASKS:
             return True
         warnings.warn(NO_VIDEO_WARNING, UserWarning, stacklevel=2)
