@@ -42,7 +42,10 @@ class EvalResult:
     were none). Under an RRA policy whose deliveries do not depend on the platoon's state
     (uniformly random) their difference is the effect of delivery on ξ.
     ``metrics``: plain
-    floats, keys with units (see :data:`METRIC_DOC`). ``traces``: per-interval mean |gap error|
+    floats, keys with units (see :data:`METRIC_DOC`). ``per_scenario``: the metrics of
+    :data:`PER_SCENARIO_METRICS` for each scenario, [B] each (the radio's only where the radio
+    ran; ``collided`` is 1.0 for a scenario that ended in a collision), for statistics paired
+    by scenario. ``traces``: per-interval mean |gap error|
     (m) and |speed error| (m/s) of scenario 0's followers, [K, F] each, when requested.
     """
 
@@ -53,6 +56,7 @@ class EvalResult:
     ivoi_lost: torch.Tensor | None = None
     traces: dict[str, torch.Tensor] = field(default_factory=dict)
     cam_latency_ms: torch.Tensor | None = None  # every delivered CAM's latency (for CDFs)
+    per_scenario: dict[str, torch.Tensor] = field(default_factory=dict)
 
 
 METRIC_DOC = {
@@ -77,6 +81,20 @@ METRIC_DOC = {
     "ivoi_std": "standard deviation of IVoI ξ (unscaled) over the live follower-intervals: the "
     "noise a delivered − lost difference is learned against",
 }
+
+
+#: The metrics of :attr:`EvalResult.per_scenario` (as in :data:`METRIC_DOC`, over one scenario's
+#: live intervals; ``collided``: 1.0 where the scenario ended in a collision); the last three
+#: only where the radio ran.
+PER_SCENARIO_METRICS = (
+    "control_cost",
+    "gap_error_abs_m",
+    "speed_error_abs_mps",
+    "collided",
+    "cam_delivery_rate",
+    "v2i_throughput_mbps_per_link",
+    "aoi_ms_mean",
+)
 
 
 class _MaskedMean:
@@ -177,6 +195,11 @@ def evaluate_system(
     cams_delivered = torch.zeros((), dtype=torch.float64, device=dev)
     aoi_sum = torch.zeros((), dtype=torch.float64, device=dev)
     peak_aoi_sum = torch.zeros((), dtype=torch.float64, device=dev)
+    # the same sums per scenario [B] (EvalResult.per_scenario)
+    scenario_sums = {
+        name: torch.zeros(b, dtype=torch.float64, device=dev)
+        for name in ("reward", "gap", "speed", "counted", "v2i", "sent", "delivered", "aoi")
+    }
     by_delivery = radio and ivoi_estimator is not None  # ξ split by CAM delivery
     xi_delivered = _MaskedMean(b, dev)
     xi_lost = _MaskedMean(b, dev)
@@ -217,6 +240,10 @@ def evaluate_system(
         gap_sum += (live * record.gap_error_m.abs().double()).sum()
         speed_sum += (live * record.speed_error_mps.abs().double()).sum()
         counted += live.sum() * f
+        scenario_sums["reward"] += (live * reward).sum(-1)
+        scenario_sums["gap"] += (live * record.gap_error_m.abs().double()).sum(-1)
+        scenario_sums["speed"] += (live * record.speed_error_mps.abs().double()).sum(-1)
+        scenario_sums["counted"] += live[:, 0] * f
         if radio:
             v2i_sum += (alive[:, None].double() * record.v2i_rate_bps.double()).mean(-1).sum()
             delay = record.cam_delay_subframes
@@ -227,6 +254,10 @@ def evaluate_system(
             latencies.append(delay[delivered].double() * subframe_ms)
             aoi_mean, peak_aoi = interval_age_ms(held_age, delay, t, subframe_ms)
             aoi_sum += (live * aoi_mean.double()).sum()
+            scenario_sums["v2i"] += (live * record.v2i_rate_bps.double()).mean(-1)
+            scenario_sums["sent"] += alive.double() * delay.shape[-1]
+            scenario_sums["delivered"] += delivered.double().sum(-1)
+            scenario_sums["aoi"] += (live * aoi_mean.double()).sum(-1)
             peak_aoi_sum += peak_aoi.double()[delivered].sum()
             if xi is not None:
                 xi_delivered.add(xi, delivered)
@@ -271,6 +302,7 @@ def evaluate_system(
         if by_delivery:
             metrics["ivoi_mean_delivered"] = xi_delivered.pooled()
             metrics["ivoi_mean_lost"] = xi_lost.pooled()
+    per_scenario = _per_scenario(scenario_sums, ~alive, f, radio)
     traces = {}
     if record_traces:
         traces = {
@@ -285,4 +317,24 @@ def evaluate_system(
         ivoi_lost=xi_lost.per_scenario().cpu() if by_delivery else None,
         traces=traces,
         cam_latency_ms=latency.cpu() if radio else None,
+        per_scenario=per_scenario,
     )
+
+
+def _per_scenario(
+    sums: dict[str, torch.Tensor], collided: torch.Tensor, followers: int, radio: bool
+) -> dict[str, torch.Tensor]:
+    """:data:`PER_SCENARIO_METRICS` [B] (float64, on the CPU) from the per-scenario sums of
+    :func:`evaluate_system` over each scenario's live intervals."""
+    counted = sums["counted"]  # live follower-intervals
+    out = {
+        "control_cost": -sums["reward"] / counted,
+        "gap_error_abs_m": sums["gap"] / counted,
+        "speed_error_abs_mps": sums["speed"] / counted,
+        "collided": collided.double(),
+    }
+    if radio:
+        out["cam_delivery_rate"] = sums["delivered"] / sums["sent"]
+        out["v2i_throughput_mbps_per_link"] = sums["v2i"] / (counted / followers) / 1e6
+        out["aoi_ms_mean"] = sums["aoi"] / sums["sent"]
+    return {name: value.cpu() for name, value in out.items()}

@@ -299,13 +299,18 @@ def run_job(command: str, cfg: Any) -> dict:
         print(f"error: {exc}; {hint}", file=sys.stderr)
         raise SystemExit(1) from None
     problems = row_problems(summary) if isinstance(summary, dict) else ""
+    notes = summary.get("notes", []) if isinstance(summary, dict) else []  # eval without π*
     if HydraConfig.get().mode == RunMode.MULTIRUN:
         print(f"job {HydraConfig.get().job.num} done: {run_dir}")
         if problems:
             print(f"warning: job {HydraConfig.get().job.num}: {REFERENCE_WARNING}{problems}")
+        for note in notes:
+            print(f"note: job {HydraConfig.get().job.num}: {note}")
         return summary
     if isinstance(summary, dict) and summary:
         print_summary(summary, title=f"{command} summary")
+    for note in notes:
+        print(f"note: {note}")
     if problems:
         print(f"warning: {REFERENCE_WARNING}{problems}", file=sys.stderr)
     print(f"run directory: {run_dir}")

@@ -13,7 +13,7 @@ PROG = "vdtn-marl"
 COMMANDS = {
     "jocc": "joint optimisation of control and communication (JOCC): the main experiment",
     "train": "train one agent group: task=control (π*), control_impaired (π̃) or rra",
-    "eval": "evaluate the trained policies of a run (checkpoint=RUN_DIR)",
+    "eval": "evaluate a run's policies (checkpoint=RUN_DIR), or fixed ones without a checkpoint",
     "bench": "run or resume a leaderboard benchmark (benchmark=NAME); `bench summarize DIR`",
     "envs": "list the registered environments: agents, clocks, descriptions",
     "rollout": "a short random-policy rollout of an environment (quick start)",
@@ -47,7 +47,7 @@ COMMON_KEYS = {
         ("resume", "true: continue the run in hydra.run.dir"),
     ],
     "eval": [
-        ("checkpoint", "run directory (its checkpoints/last.pt) or checkpoint file; required"),
+        ("checkpoint", "run directory (its checkpoints/last.pt) or .pt file; null: fixed policies"),
         ("experiment.eval_episodes", "scenarios evaluated"),
         ("experiment.eval_intervals", "control intervals per evaluation episode"),
         ("seed", "random seed (it picks the held-out scenarios)"),
@@ -73,6 +73,8 @@ EXAMPLES = {
         "vdtn-marl eval checkpoint=outputs/jocc/<date_time> experiment.eval_episodes=32",
         "vdtn-marl eval checkpoint=outputs/jocc/<date_time> rra=round_robin",
         "vdtn-marl eval checkpoint=outputs/jocc/<date_time> --cfg job   # the config it uses",
+        "vdtn-marl eval control=cacc rra=greedy   # fixed policies, no checkpoint: no EVoI",
+        "vdtn-marl -m eval control=cacc rra=greedy,opportunistic seed=0,1,2   # one process",
     ],
 }
 
@@ -259,7 +261,9 @@ _OUTPUTS = {
     ],
     "eval": [
         "  config.yaml (the run's config with your overrides), evaluation.csv, summary.json",
-        "  (with `warnings` naming policies the checkpoint never trained), eval.log, .hydra/",
+        "  (with `warnings` naming policies the checkpoint never trained; without a checkpoint",
+        "  `notes` says there is no EVoI), evaluation_raw.npz (per-scenario arrays), eval.log,",
+        "  .hydra/",
         "  video=true: episode.gif (video_format=mp4: episode.mp4) of the first scenario",
     ],
 }
@@ -280,7 +284,10 @@ _COMMAND_DETAILS = {
     "eval": "Evaluates the policies of `checkpoint` with the config of its run (scenario, algo,\n"
     "control, rra, experiment, seed); overrides on the command line change it, e.g.\n"
     "experiment.eval_episodes=32, or rra=round_robin to pair the run's control with a baseline.\n"
-    "A task=control checkpoint is scored as π* on perfect observations, as its run did.",
+    "A task=control checkpoint is scored as π* on perfect observations, as its run did.\n"
+    "Without `checkpoint`, fixed policies are scored (a control baseline or control=policy,\n"
+    "with an RRA baseline or rra=policy): there is no trained π*, so no EVoI and no IVoI.\n"
+    "Several policies or seeds in one process: -m with comma-separated values.",
 }
 
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from vdtn_marl.algos.checkpoint import load_checkpoint, untrained_policies
 from vdtn_marl.errors import CheckpointError, ConfigError
-from vdtn_marl.experiment.config import RunConfig, to_dict, validate
+from vdtn_marl.experiment.config import RunConfig, check_fixed_policies, to_dict, validate
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.io.files import SUMMARY_FILE, atomic_write_json
 from vdtn_marl.io.log import metrics_line
@@ -79,9 +79,14 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
 
     The learned policies that act but were never trained are named in ``summary["warnings"]``
     (and logged); a checkpoint none of whose acting policies was trained is refused
-    (:class:`ConfigError`)."""
+    (:class:`ConfigError`).
+
+    Without ``cfg.checkpoint``, fixed policies (a control baseline or ``control=policy`` with an
+    RRA baseline or ``rra=policy``) are scored on impaired observations: with no trained π*
+    there is no EVoI and no IVoI (``evoi`` and ``ivoi_sum`` are None in the summary, and
+    ``notes`` says why); learned ones are refused (:class:`ConfigError`)."""
     if not cfg.checkpoint:
-        raise ConfigError("checkpoint=None: eval needs checkpoint=<path to a .pt file>")
+        return _evaluate_fixed(cfg, run_dir)
     began = time.perf_counter()
     payload = load_checkpoint(cfg.checkpoint, to_dict(cfg))
     warnings, nothing_trained = untrained_policies(payload, to_dict(cfg))
@@ -110,7 +115,41 @@ def evaluate(cfg: RunConfig, run_dir: str | Path) -> dict:
     summary["checkpoint_task"] = task
     summary["task"] = "eval"
     summary["warnings"] = warnings
-    atomic_write_json(Path(run_dir) / SUMMARY_FILE, summary)
+    return _write_eval(loop, summary, began)
+
+
+#: ``notes`` of an ``eval`` of fixed policies (one line, also printed under its table).
+NO_PI_STAR_NOTE = (
+    "no trained π* (eval without a checkpoint): EVoI and IVoI are not computed; the "
+    "metrics are those of the fixed policies"
+)
+
+
+def _evaluate_fixed(cfg: RunConfig, run_dir: str | Path) -> dict:
+    """``eval`` without a checkpoint: the fixed policies of ``cfg`` on the held-out
+    scenarios, without π* (see :func:`evaluate`)."""
+    check_fixed_policies(validate(cfg))
+    began = time.perf_counter()
+    _log.info(
+        "eval of control=%s rra=%s (no checkpoint) in %s: %d episode(s) of %d interval(s), "
+        "seed=%d", cfg.control.name, cfg.rra.name, Path(run_dir).resolve(),
+        cfg.experiment.eval_episodes, cfg.experiment.eval_intervals, cfg.seed,
+    )  # fmt: skip
+    loop = JointOptimisation(cfg, run_dir, task="jocc")
+    row = loop.evaluate(pi_star=False)
+    summary = loop.summary(row["eval_seconds"], resumed=False)
+    for key in ("kappa1", "kappa2"):  # the weights of an RRA reward that nothing learns from
+        summary.pop(key, None)
+    summary.update(checkpoint=None, task="eval", evoi=None, ivoi_sum=None, warnings=[])
+    summary["notes"] = [NO_PI_STAR_NOTE]
+    _log.info(NO_PI_STAR_NOTE)
+    return _write_eval(loop, summary, began)
+
+
+def _write_eval(loop: JointOptimisation, summary: dict, began: float) -> dict:
+    """Write an ``eval``'s ``evaluation_raw.npz`` and ``summary.json``; log its end."""
+    loop.write_raw_evaluation()
+    atomic_write_json(loop.run_dir / SUMMARY_FILE, summary)
     loop.loggers.close()
     _log.info(
         "eval done in %.1f s: %s", time.perf_counter() - began,

@@ -81,15 +81,18 @@ def job_config(cfg: Any) -> dict:
 
 def to_run_config(data: dict, command: str = "jocc") -> Any:
     """Composed job config (plain data) -> validated :class:`RunConfig`: ranges, the device,
-    and the checkpoint (required by ``eval``; a run directory stands for its last checkpoint,
-    and ``data["checkpoint"]`` is updated to the file)."""
+    and the checkpoint (a run directory stands for its last checkpoint, and
+    ``data["checkpoint"]`` is updated to the file; ``eval`` without one scores fixed policies:
+    :func:`~vdtn_marl.experiment.config.check_fixed_policies`)."""
     from vdtn_marl.experiment import config
 
-    data["checkpoint"] = checkpoint_file(data.get("checkpoint"), required=command == "eval")
+    data["checkpoint"] = checkpoint_file(data.get("checkpoint"), required=False)
     run_cfg = config.validate(config.from_dict(data))
     config.validate_device(run_cfg.device)
     if run_cfg.checkpoint is not None:
         _check_checkpoint(run_cfg, command)
+    elif command == "eval":
+        config.check_fixed_policies(run_cfg)
     _build_user_policies(run_cfg)
     return run_cfg
 

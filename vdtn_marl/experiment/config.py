@@ -265,6 +265,33 @@ def _check_task(cfg: RunConfig) -> None:
         )
 
 
+#: The policies ``eval`` scores without a checkpoint (nothing of theirs is trained): every
+#: control but the learned one, every RRA policy but the learned ones.
+FIXED_CONTROLS = tuple(name for name in CONTROLS if name != "learned")
+FIXED_RRA = tuple(name for name in RRA_METHODS if name not in LEARNED_RRA)
+
+
+def check_fixed_policies(cfg: RunConfig) -> None:
+    """``eval`` without ``checkpoint``: the control and the RRA policy must both be fixed (a
+    baseline or the user's), since no trained policy is loaded; :class:`ConfigError` names the
+    learned ones and what is allowed."""
+    learned = [
+        f"{group}={name}"
+        for group, name, fixed in (
+            ("control", cfg.control.name, FIXED_CONTROLS),
+            ("rra", cfg.rra.name, FIXED_RRA),
+        )
+        if name not in fixed
+    ]
+    if learned:
+        raise ConfigError(
+            f"checkpoint=None: eval without a checkpoint scores fixed policies, but "
+            f"{' and '.join(learned)} {'is' if len(learned) == 1 else 'are'} learned; allowed: "
+            f"checkpoint=<a run directory or checkpoint file>, or "
+            f"control={'|'.join(FIXED_CONTROLS)} with rra={'|'.join(FIXED_RRA)}"
+        )
+
+
 def validate(cfg: RunConfig) -> RunConfig:
     """Check every key of ``cfg``; raise :class:`ConfigError` naming key, value and range."""
     s, a, c, r, e = cfg.scenario, cfg.algo, cfg.control, cfg.rra, cfg.experiment

@@ -5,10 +5,12 @@ policy, on impaired observations) and π* (on perfect ones) over the same held-o
 seeded apart from every training scenario (:data:`EVAL_SEED_OFFSET`): control cost, gap/speed
 errors, CAM delivery and latency, V2I throughput per link, EVoI = J̃ − J* with its 95% CI
 (:func:`~vdtn_marl.voi.expected_voi`) and, for comparison, the sum of the IVoI the estimator
-paid. A ``task=control`` run scores π* against the CACC instead.
+paid. A ``task=control`` run scores π* against the CACC instead, and ``eval`` of fixed
+policies (no checkpoint, so no trained π*) scores the acting system alone: no EVoI, no IVoI.
 
-:func:`run_summary` is the run's ``summary.json``: what ran, the last evaluation's metrics,
-and the evaluation after each JOCC iteration (:data:`PER_ITERATION_METRICS`).
+:func:`run_summary` is the run's ``summary.json``: what ran (the user's policies first, by
+their spec: :func:`user_policy_specs`), the last evaluation's metrics, and the evaluation after
+each JOCC iteration (:data:`PER_ITERATION_METRICS`).
 """
 
 from __future__ import annotations
@@ -59,12 +61,13 @@ class ActingSystem:
 @dataclass
 class Evaluation:
     """One ``evaluate`` stage: the row of ``evaluation.csv`` and the results behind it
-    (``acting`` is None when π* was scored against the CACC), and with a ``video`` the frames
+    (``acting`` is None when π* was scored against the CACC, ``optimal`` None when no π* was
+    scored), and with a ``video`` the frames
     of the scenarios it drew, one per control interval, by video stem (the acting system's;
     π*'s when there is none); ``drawn`` the scenario index of each stem."""
 
     row: dict[str, Any]
-    optimal: EvalResult
+    optimal: EvalResult | None
     acting: EvalResult | None
     frames: dict[str, list] = field(default_factory=dict)
     drawn: dict[str, int] = field(default_factory=dict)
@@ -110,7 +113,7 @@ def _render(twin, record, index: int, batch: int):
 def evaluate_stage(
     cfg: RunConfig,
     params: TwinParams,
-    optimal_policy: Callable,
+    optimal_policy: Callable | None,
     acting: ActingSystem | None,
     *,
     trace_source: str | TraceSource,
@@ -120,7 +123,9 @@ def evaluate_stage(
 ) -> Evaluation:
     """Evaluate π* (``optimal_policy``, perfect observations) and the ``acting`` system over
     ``cfg.experiment.eval_episodes`` held-out scenarios of ``eval_intervals`` intervals; with
-    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead.
+    ``acting=None`` (a ``task=control`` run) π* is scored against the CACC instead; with
+    ``optimal_policy=None`` (no trained π*: ``eval`` of fixed policies) the acting system is
+    scored alone, and the row has no EVoI, IVoI or π* entries.
 
     ``video`` (a key of :data:`VIDEO_SCENARIOS`) draws scenarios after every interval
     (:func:`~vdtn_marl.envs.render.render_twin`): ``first`` the first scenario during the
@@ -129,6 +134,8 @@ def evaluate_stage(
     and changes no result, and the second run leaves the global RNG as it found it."""
     if video is not None and video not in VIDEO_SCENARIOS:
         raise ValueError(f"video={video!r} is not one of {', '.join(VIDEO_SCENARIOS)}")
+    if optimal_policy is None and acting is None:
+        raise ValueError("evaluate_stage needs π* (optimal_policy), an acting system, or both")
     episodes = cfg.experiment.eval_episodes
     frames: dict[str, list] = {}
     drawn: dict[str, int] = {}
@@ -141,10 +148,12 @@ def evaluate_stage(
         drawn["episode"] = 0
     common = evaluation_scenarios(cfg, trace_source, device)
     began = time.perf_counter()
-    optimal = evaluate_system(
-        params, optimal_policy, None, perfect=True,
-        on_interval=draw if drawn and acting is None else None, **common,
-    )  # fmt: skip
+    optimal = None
+    if optimal_policy is not None:
+        optimal = evaluate_system(
+            params, optimal_policy, None, perfect=True,
+            on_interval=draw if drawn and acting is None else None, **common,
+        )  # fmt: skip
     row: dict[str, Any] = {"jocc_iteration": jocc_iteration}
     result = None
     acting_args: dict[str, Any] = {}
@@ -161,14 +170,16 @@ def evaluate_stage(
             params, acting.control, acting.rra, on_interval=draw if drawn else None,
             **acting_args, **common,
         )  # fmt: skip
-        evoi, low, high = expected_voi(result.returns, optimal.returns)
-        ivoi, ivoi_low, ivoi_high = mean_ci(result.ivoi_sums)
         row.update(result.metrics)
-        row.update(
-            optimal_control_cost=optimal.metrics["control_cost"],
-            evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
-            ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high,
-        )  # fmt: skip
+        if optimal is not None:
+            evoi, low, high = expected_voi(result.returns, optimal.returns)
+            row.update(
+                optimal_control_cost=optimal.metrics["control_cost"],
+                evoi=evoi, evoi_ci_low=low, evoi_ci_high=high,
+            )  # fmt: skip
+        if result.ivoi_sums is not None:
+            ivoi, ivoi_low, ivoi_high = mean_ci(result.ivoi_sums)
+            row.update(ivoi_sum=ivoi, ivoi_sum_ci_low=ivoi_low, ivoi_sum_ci_high=ivoi_high)
     row["eval_seconds"] = time.perf_counter() - began
     if video == "best_worst":
         returns = (optimal if result is None else result).returns
@@ -228,6 +239,9 @@ def run_summary(
     return {
         "vdtn_marl_version": __version__,
         "task": task,
+        # rra=policy, control=policy: the user's policies as given (module:factory,
+        # file.py:factory or a checkpoint's path), by key
+        **({"user_policies": specs} if (specs := user_policy_specs(cfg)) else {}),
         "seed": cfg.seed,
         # the RRA reward weights, where this task trains RRA agents
         **({"kappa1": cfg.rra.kappa1, "kappa2": cfg.rra.kappa2_value} if "rra" in stages else {}),
@@ -262,6 +276,13 @@ def run_summary(
         **({"videos": {k: str(v) for k, v in videos.items()}} if videos else {}),
         "config": summary_config(cfg, task),
     }
+
+
+def user_policy_specs(cfg: RunConfig) -> dict[str, str]:
+    """``{"control.policy": spec, "rra.policy": spec}`` for the groups set to ``policy`` (the
+    user's own policy); empty where none is."""
+    sections = (("control.policy", cfg.control), ("rra.policy", cfg.rra))
+    return {key: str(s.policy) for key, s in sections if s.name == "policy" and s.policy}
 
 
 def summary_config(cfg: RunConfig, task: str) -> dict[str, Any]:

@@ -61,6 +61,7 @@ from vdtn_marl.errors import ConfigError
 from vdtn_marl.experiment import checkpoint, outputs, warm_start
 from vdtn_marl.experiment.config import RunConfig, to_dict, validate, validate_device
 from vdtn_marl.experiment.evaluate import (
+    EVAL_SEED_OFFSET,
     ActingSystem,
     evaluate_stage,
     perfect_returns,
@@ -695,18 +696,21 @@ class JointOptimisation:
             _log.warning("reference check failed: %s", row["reference_problems"])
         return row
 
-    def evaluate(self) -> dict[str, Any]:
+    def evaluate(self, pi_star: bool = True) -> dict[str, Any]:
         """The ``evaluate`` stage (:func:`.evaluate.evaluate_stage`): metrics of the acting
-        system, EVoI against π*; the row is logged to ``evaluation.csv`` and returned."""
+        system, EVoI against π*; the row is logged to ``evaluation.csv`` and returned. Without
+        ``pi_star`` (``eval`` of fixed policies: no π* was trained) the acting system is
+        scored alone: no EVoI, no IVoI, no reference check."""
         acting = None
         if self.stages != TASK_STAGES["control"]:  # task=control scores π* against the CACC
+            estimator = self.estimator if pi_star else None  # ξ is read off π*
             acting = ActingSystem(
-                self.control_policy(), self.rra_policy(), self.estimator, self.completion
+                self.control_policy(), self.rra_policy(), estimator, self.completion
             )
         result = evaluate_stage(
             self.cfg,
             self.params,
-            ActorPolicy(self.pi_star.actor, "vehicle"),
+            ActorPolicy(self.pi_star.actor, "vehicle") if pi_star else None,
             acting,
             trace_source=self.eval_traces,
             device=self.device,
@@ -714,7 +718,8 @@ class JointOptimisation:
             video=self.cfg.video_scenarios if self.cfg.video else None,
         )
         self._last_results = (result.optimal, result.acting)
-        result.row.update(self.reference_row(result.optimal, result.acting))
+        if pi_star:
+            result.row.update(self.reference_row(result.optimal, result.acting))
         fps = 1.0 / self.params.platoon.control_interval_s  # one frame per interval: real time
         for stem, frames in result.frames.items():
             path = write_video(self.run_dir, frames, fps, self.cfg.video_format, stem=stem)
@@ -785,7 +790,8 @@ class JointOptimisation:
         """The last evaluation's arrays as ``evaluation_raw.npz`` (:mod:`.outputs`)."""
         optimal, acting = getattr(self, "_last_results", (None, None))
         if acting is not None:
-            outputs.write_raw_evaluation(self.run_dir, self.params, optimal, acting)
+            seed = EVAL_SEED_OFFSET + self.cfg.seed  # the held-out scenarios' (.evaluate)
+            outputs.write_raw_evaluation(self.run_dir, self.params, optimal, acting, seed)
 
     def write_plots(self) -> list[str]:
         """Training curves, and error traces and CAM latency CDF of the last evaluation."""

@@ -12,18 +12,35 @@ from vdtn_marl.io.files import RAW_EVALUATION_FILE, atomic_write_bytes
 from vdtn_marl.sim.params import TwinParams
 
 
-def write_raw_evaluation(run_dir: Path, params: TwinParams, optimal: Any, acting: Any) -> None:
+def write_raw_evaluation(
+    run_dir: Path,
+    params: TwinParams,
+    optimal: Any,
+    acting: Any,
+    scenario_seed: int | None = None,
+) -> None:
     """``evaluation_raw.npz``: per-scenario returns of the acting system and of π*, scenario
     0's |gap|/|speed| error traces [K, F] and every delivered CAM's latency (ms), for plots
-    across runs (the leaderboard's). ``optimal``/``acting``: evaluation results."""
+    across runs (the leaderboard's); and each scenario's metrics
+    (:data:`~vdtn_marl.algos.evaluate.PER_SCENARIO_METRICS`) as ``scenario_<metric>`` [E] for
+    the acting system and ``optimal_scenario_<metric>`` for π* (its control metrics: π* sees
+    perfect observations, without the radio), so that runs pair scenario by scenario as well
+    as seed by seed. ``scenario_seed``: the seed of the held-out scenarios (runs of one
+    ``seed`` share them; scenario ``i`` is the same in each). ``optimal``/``acting``:
+    evaluation results (``optimal`` None where no π* was scored: no ``optimal_*`` arrays)."""
     import numpy as np
 
     arrays = {
         "interval_s": np.float64(params.platoon.control_interval_s),
         "returns": acting.returns.numpy(),
-        "optimal_returns": optimal.returns.numpy(),
         **{key: value.numpy() for key, value in acting.traces.items()},
+        **{f"scenario_{key}": value.numpy() for key, value in acting.per_scenario.items()},
     }
+    if optimal is not None:
+        arrays["optimal_returns"] = optimal.returns.numpy()
+        arrays.update({f"optimal_scenario_{k}": v.numpy() for k, v in optimal.per_scenario.items()})
+    if scenario_seed is not None:
+        arrays["scenario_seed"] = np.int64(scenario_seed)
     if acting.cam_latency_ms is not None:
         arrays["cam_latency_ms"] = acting.cam_latency_ms.numpy()
     buffer = io.BytesIO()
