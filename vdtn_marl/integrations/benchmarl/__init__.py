@@ -68,7 +68,6 @@ from pathlib import Path
 from typing import Any
 
 from vdtn_marl.envs.registration import make, spec
-from vdtn_marl.envs.torchrl import RRA_SUBFRAME_INFO_KEYS
 from vdtn_marl.errors import ConfigError, MissingExtraError
 
 EXTRA_HINT = (
@@ -289,6 +288,8 @@ class VDTNClass(TaskClass):
         """For a group whose steps are subframes (``closes_interval`` in its infos): the mean of
         each interval metric over the steps that close an interval, where it is that
         interval's, under the key of BenchMARL's plain mean over steps (which it replaces)."""
+        from vdtn_marl.envs.torchrl import RRA_SUBFRAME_INFO_KEYS
+
         logged = {}
         following = batch.get("next", None)
         for group, entries in following.items() if following is not None else ():
