@@ -56,7 +56,8 @@ def test_readme_quotes_pi_stars_gap_to_the_oracle_as_generated():
 
 def test_performance_page_quotes_the_side_by_side_run_as_generated():
     """docs/performance.md's side-by-side tables (two machines) and the draws-ahead table come
-    from the committed JSONs of benchmarks/throughput.py and benchmarks/draw_ahead.py."""
+    from the committed JSONs of benchmarks/throughput.py and
+    studies/2026-12-03-draw-ahead/draw_ahead.py."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
     for file in ("throughput_peer_liang.json", "throughput_peer_liang_epyc.json"):
         side = json.loads((ROOT / "benchmarks/results" / file).read_text())
@@ -74,7 +75,7 @@ def test_performance_page_quotes_the_side_by_side_run_as_generated():
                 f"({min(runs):.{digits}f}–{max(runs):.{digits}f}) |"
             )
             assert quoted in page, (file, quoted)
-    ahead = json.loads((ROOT / "benchmarks/results/draw_ahead.json").read_text())
+    ahead = json.loads((ROOT / "studies/2026-12-03-draw-ahead/draw_ahead.json").read_text())
     for r in ahead["rows"]:
         quoted = (
             f"{r['wall_s_ahead']:.2f} | {r['wall_s_at_start']:.2f} | "
@@ -110,9 +111,9 @@ def test_performance_page_quotes_the_stage_sweep_as_generated():
 
 def test_performance_page_quotes_the_two_cores_run_as_generated():
     """docs/performance.md's *Two cores* table and estimates come from the committed JSON of
-    benchmarks/two_cores.py."""
+    studies/2026-12-06-two-cores/two_cores.py."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
-    run = json.loads((ROOT / "benchmarks/results/two_cores.json").read_text())
+    run = json.loads((ROOT / "studies/2026-12-06-two-cores/two_cores.json").read_text())
     assert run["complete"] and len(run["rows"]) == 4
     for r in run["rows"]:
         low, high = r["one_over_shards_range"]
@@ -144,9 +145,11 @@ def test_performance_page_quotes_the_two_cores_run_as_generated():
 
 def test_performance_page_quotes_the_clean_whole_run_as_generated():
     """docs/performance.md's *A clean whole run* table comes from the committed JSON of
-    benchmarks/paper_stage_timings.py over that run."""
+    studies/2026-12-06-paper-stage-timings/paper_stage_timings.py over that run."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
-    run = json.loads((ROOT / "benchmarks/results/paper_iteration_clean.json").read_text())
+    run = json.loads(
+        (ROOT / "studies/2026-12-06-paper-stage-timings/paper_iteration_clean.json").read_text()
+    )
     paper = run["runs"]["paper"]
     assert [m["complete"] for m in paper["measured"]] == [True, True]
     for m in paper["measured"]:
@@ -162,9 +165,12 @@ def test_performance_page_quotes_the_clean_whole_run_as_generated():
 
 def test_performance_page_quotes_the_mode_shortcut_run_as_generated():
     """docs/performance.md's *The mode without its probabilities* table comes from the
-    committed JSON of benchmarks/rra_mode_shortcut.py, whose arms acted bit for bit alike."""
+    committed JSON of studies/2026-12-06-rra-mode-shortcut/rra_mode_shortcut.py, whose arms acted
+    bit for bit alike."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
-    run = json.loads((ROOT / "benchmarks/results/rra_mode_shortcut.json").read_text())
+    run = json.loads(
+        (ROOT / "studies/2026-12-06-rra-mode-shortcut/rra_mode_shortcut.json").read_text()
+    )
     assert run["rows"]
     for r in run["rows"]:
         assert r["actions_bit_identical"]
@@ -184,9 +190,12 @@ def test_performance_page_quotes_the_mode_shortcut_run_as_generated():
 def test_performance_page_quotes_the_sharded_collection_run_as_generated():
     """docs/performance.md's *Sharded collection* table and estimate, and the lines of
     profile.md and CHANGELOG.md on it, come from the committed JSON of
-    benchmarks/sharded_collection.py (and its bound from two_cores_epyc.json)."""
+    studies/2026-12-06-sharded-collection/sharded_collection.py (and its bound from
+    two_cores_epyc.json)."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
-    run = json.loads((ROOT / "benchmarks/results/sharded_collection.json").read_text())
+    run = json.loads(
+        (ROOT / "studies/2026-12-06-sharded-collection/sharded_collection.json").read_text()
+    )
     rows = {r["stage"]: r for r in run["rows"]}
     assert set(rows) == {"pi_star", "pi_tilde_random", "pi_tilde_learned", "rra"}
     for stage in ("pi_star", "pi_tilde_random", "pi_tilde_learned"):
@@ -206,7 +215,9 @@ def test_performance_page_quotes_the_sharded_collection_run_as_generated():
         f"{e['sharded']['first_min']:.1f} and {e['sharded_threads']['first_min']:.1f} min)"
     )
     assert quoted in page, quoted
-    bound = json.loads((ROOT / "benchmarks/results/two_cores_epyc.json").read_text())["rows"][0]
+    bound = json.loads((ROOT / "studies/2026-12-06-two-cores/two_cores_epyc.json").read_text())[
+        "rows"
+    ][0]
     low, high = bound["one_over_shards_range"]
     quoted = (
         f"gives {bound['one_over_shards']:.2f}× ({low:.2f}–{high:.2f}) for π̃'s collection "
@@ -227,11 +238,13 @@ def test_performance_page_quotes_the_sharded_collection_run_as_generated():
 
 def test_performance_page_quotes_the_sharded_pairing_as_generated():
     """The paired learning check of algo.collector_workers=2 in docs/performance.md comes from
-    the committed JSONs of benchmarks/paper_batch_pairing.py."""
+    the committed JSONs of studies/2026-12-06-paper-batch-pairing/paper_batch_pairing.py."""
     page = _one_line((ROOT / "docs/performance.md").read_text(encoding="utf-8"))
     for stage, name in (("pi_star", "π\\*"), ("pi_tilde", "π̃, random RRA")):
         run = json.loads(
-            (ROOT / f"benchmarks/results/paper_sharded_pairing_{stage}.json").read_text()
+            (
+                ROOT / f"studies/2026-12-06-paper-batch-pairing/paper_sharded_pairing_{stage}.json"
+            ).read_text()
         )
         assert run["complete"] and run["new_overrides"] == ["algo.collector_workers=2"]
         for r in (r for r in run["rows"] if r["iteration"] > 0):
@@ -256,9 +269,10 @@ def test_profile_page_quotes_the_headline_cam_delivery_as_generated():
 
 
 def test_profile_page_quotes_pi_tildes_budget_at_the_paper_sizes_as_generated():
-    """docs/profile.md and docs/performance.md quote benchmarks/pi_tilde_budget.py's budget at
+    """docs/profile.md and docs/performance.md quote
+    studies/2026-12-05-pi-tilde-budget/pi_tilde_budget.py's budget at
     the experiment=paper sizes (its JSON's ``budget.paper``) and the floor at B = 256."""
-    run = json.loads((ROOT / "benchmarks/results/pi_tilde_budget.json").read_text())
+    run = json.loads((ROOT / "studies/2026-12-05-pi-tilde-budget/pi_tilde_budget.json").read_text())
     paper = run["budget"]["paper"]
     assert paper["chosen_control_batch"] == 256 and not paper["reachable_at_the_floor"]
     floor = next(r["floor_s"] for r in run["rows"] if r["batch_size"] == 256)

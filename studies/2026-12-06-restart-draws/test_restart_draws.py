@@ -1,4 +1,4 @@
-"""benchmarks/restart_draws.py: both orders restart the same scenarios at the same intervals,
+"""restart_draws.py: both orders restart the same scenarios at the same intervals,
 the twin draws ahead where the batch allows it, and bad arguments are refused by name."""
 
 import importlib.util
@@ -9,7 +9,7 @@ import pytest
 
 from vdtn_marl.sim import link
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "restart_draws.py"
+SCRIPT = Path(__file__).resolve().parent / "restart_draws.py"
 
 
 def _script():

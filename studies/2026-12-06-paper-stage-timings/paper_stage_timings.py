@@ -4,8 +4,8 @@ and what they make of one paper-scale JOCC iteration.
     vdtn-marl jocc experiment=paper experiment.jocc_iterations=2 experiment.control_iterations=2 \
         experiment.rra_iterations=2 control.warm_start=none algo.num_envs=64 \
         algo.rollout_steps=400 hydra.run.dir=runs/old        # and the same with 256 × 100
-    python benchmarks/paper_stage_timings.py old=runs/old new=runs/new \
-        --out results/paper_stage_timings.json
+    python studies/2026-12-06-paper-stage-timings/paper_stage_timings.py old=runs/old new=runs/new \
+        --out studies/2026-12-06-paper-stage-timings/paper_stage_timings.json
 
 Run the runs at the same time (or alternately) so that they share the machine's load: the first
 run is the reference, and every stage of the others is reported as a ratio to it. Per run it
@@ -28,8 +28,9 @@ and CPU seconds from ``/usr/bin/time -v -o FILE``:
 
     /usr/bin/time -v -o runs/paper/time.txt vdtn-marl jocc experiment=paper \
         experiment.jocc_iterations=2 hydra.run.dir=runs/paper
-    python benchmarks/paper_stage_timings.py paper=runs/paper \
-        --time-v paper=runs/paper/time.txt --out results/paper_iteration.json
+    python studies/2026-12-06-paper-stage-timings/paper_stage_timings.py paper=runs/paper \
+        --time-v paper=runs/paper/time.txt \
+            --out studies/2026-12-06-paper-stage-timings/paper_iteration.json
 """
 
 from __future__ import annotations
@@ -41,7 +42,7 @@ import statistics
 from datetime import datetime
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "paper_stage_timings.json"
+RESULTS = Path(__file__).parent / "paper_stage_timings.json"
 TARGET_S = 30 * 60.0  # DESIGN §7: one experiment=paper JOCC iteration on 2 cores
 STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned", "rra")
 EVALUATE_DONE = re.compile(r"stage evaluate done in ([0-9.]+) s")

@@ -2,8 +2,9 @@
 numbers: the kernel's arithmetic (``link.link_major_arithmetic``, the very function the twin
 runs from B = 256 on) called eagerly and compiled, on the same interval, in one process.
 
-    python benchmarks/compile_kernel.py            # writes results/compile_kernel.json
-    python benchmarks/compile_kernel.py --batch-sizes 256 --repeats 2 --out /tmp/ck.json
+    python studies/2026-12-04-compile-kernel/compile_kernel.py  # writes compile_kernel.json
+    python studies/2026-12-04-compile-kernel/compile_kernel.py --batch-sizes 256 --repeats 2 \
+        --out /tmp/ck.json
 
 Per batch size B a ``DigitalTwin`` (seed ``--seed``, draws at the interval start) gives one
 interval's tables and random RRA actions; the kernel runs its T subframes from the interval's
@@ -27,7 +28,7 @@ import statistics
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "compile_kernel.json"
+RESULTS = Path(__file__).parent / "compile_kernel.json"
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -2,8 +2,9 @@
 interval's draws made on a second thread (``DigitalTwin.draw_ahead``) against drawn at each
 interval's start, and the time of a paper JOCC iteration either way.
 
-    python benchmarks/draw_ahead.py                # writes results/draw_ahead.json
-    python benchmarks/draw_ahead.py --stages pi_tilde_random --repeats 1 --out /tmp/da.json
+    python studies/2026-12-03-draw-ahead/draw_ahead.py  # writes draw_ahead.json
+    python studies/2026-12-03-draw-ahead/draw_ahead.py --stages pi_tilde_random --repeats 1 \
+        --out /tmp/da.json
 
 Per stage (``--stages``, default all four) one ``experiment=paper`` loop (``threads=1``, the
 stage's own batch sizes) is built, its observation scaling fitted and one PPO iteration run as
@@ -36,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "draw_ahead.json"
+RESULTS = Path(__file__).parent / "draw_ahead.json"
 STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned", "rra")
 SETTINGS = ("ahead", "at_start")
 

@@ -1,4 +1,4 @@
-"""benchmarks/steady_state_resets.py on a tiny JOCC run's checkpoint: all arms collect from
+"""steady_state_resets.py on a tiny JOCC run's checkpoint: all arms collect from
 the same weights, the run, reset_first and separate arms from the checkpoint's persisting
 scenarios, the fresh arm from a reset; the counts are those of the collections."""
 
@@ -17,7 +17,7 @@ from vdtn_marl.experiment.config import (
 )
 from vdtn_marl.experiment.jocc import JointOptimisation
 
-SCRIPT = Path(__file__).resolve().parents[1] / "benchmarks" / "steady_state_resets.py"
+SCRIPT = Path(__file__).resolve().parent / "steady_state_resets.py"
 
 
 def _script():

@@ -1,21 +1,22 @@
 """What the second core can give a JOCC stage: its batch split over processes, one per core,
 against one process on one core; and the PPO update on two threads against one.
 
-    python benchmarks/two_cores.py          # writes results/two_cores.json
-    python benchmarks/two_cores.py --stages pi_tilde_learned --iterations 2 --repeats 1 \
+    python studies/2026-12-06-two-cores/two_cores.py  # writes two_cores.json
+    python studies/2026-12-06-two-cores/two_cores.py --stages pi_tilde_learned --iterations 2 \
+        --repeats 1 \
         --out /tmp/two_cores.json
 
 A run (``vdtn-marl jocc``, ``threads=1``) uses one core for torch and, at B ≥ 128 scenarios,
 the twin's draw-ahead thread on the second core for a small part of the time
-(``results/draw_ahead.json``). The idle core could run half of a stage's scenarios: k worker
-processes of B/k scenarios each collect B × rollout frames together, and the trainer updates
-on their joined batch. This script measures what that can gain at most, without the
+(``studies/2026-12-03-draw-ahead/draw_ahead.json``). The idle core could run half of a stage's
+scenarios: k worker processes of B/k scenarios each collect B × rollout frames together, and the
+trainer updates on their joined batch. This script measures what that can gain at most, without the
 collector's messages; ``sharded_collection.py`` times the collector that is built
 (``algo.collector_workers``).
 
 Per stage (``pi_star``, ``pi_tilde_random``, ``pi_tilde_learned``, ``rra``: as in
-``stage_throughput.py``, the ``experiment=paper`` loop and batch sizes) and repeat, two arms
-in fresh processes, one after the other (the order alternates between repeats):
+``benchmarks/stage_throughput.py``, the ``experiment=paper`` loop and batch sizes) and repeat, two
+arms in fresh processes, one after the other (the order alternates between repeats):
 
 - ``one``: one process at the paper's B. Each timed iteration collects, then updates on the
   data twice, on 1 torch thread and on 2 (the order alternates; the same shapes, so the same
@@ -47,11 +48,12 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE))
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = HERE.parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
 import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
 
-RESULTS = HERE / "results" / "two_cores.json"
+RESULTS = HERE / "two_cores.json"
 STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned", "rra")
 ARMS = ("one", "shards")
 

@@ -1,11 +1,13 @@
 """What ``algo.collector_workers`` gives the JOCC stages of ``experiment=paper``.
 
-    python benchmarks/sharded_collection.py      # writes results/sharded_collection.json
-    python benchmarks/sharded_collection.py --stages pi_tilde_learned --pairs 1 \
+    python studies/2026-12-06-sharded-collection/sharded_collection.py  # writes \
+        sharded_collection.json
+    python studies/2026-12-06-sharded-collection/sharded_collection.py \
+        --stages pi_tilde_learned --pairs 1 \
         --out /tmp/sharded.json
 
 Three arms, each a ``vdtn-marl jocc experiment=paper`` loop built in this process as
-``stage_throughput.py`` builds it (the paper's batch sizes, torch on one thread):
+``benchmarks/stage_throughput.py`` builds it (the paper's batch sizes, torch on one thread):
 
 - ``one``: the defaults (the trainer's process collects, its update on one thread);
 - ``sharded``: ``algo.collector_workers=W`` (W spawned worker processes of B / W scenarios
@@ -36,11 +38,12 @@ import statistics
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE))
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = HERE.parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
 import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
 
-RESULTS = HERE / "results" / "sharded_collection.json"
+RESULTS = HERE / "sharded_collection.json"
 VEHICLE_STAGES = ("pi_star", "pi_tilde_random", "pi_tilde_learned")
 STAGES = (*VEHICLE_STAGES, "rra")
 ARMS = ("one", "sharded", "sharded_threads")

@@ -1,8 +1,9 @@
 """What π̃'s collection costs in a run's steady state against freshly reset scenarios: the
 partial resets that persisting scenarios bring, counted and timed in one process.
 
-    python benchmarks/steady_state_resets.py RUN_DIR/checkpoints/last.pt \
-        --out results/steady_state_resets.json
+    python studies/2026-12-06-steady-state-resets/steady_state_resets.py \
+        RUN_DIR/checkpoints/last.pt \
+        --out studies/2026-12-06-steady-state-resets/steady_state_resets.json
 
 ``benchmarks/stage_throughput.py`` times each stage from freshly reset scenarios: they all
 start at interval 0, so their episodes end together (every 400 intervals, once per 4 PPO
@@ -26,7 +27,8 @@ collection (no update, so every arm acts with the checkpoint's weights):
   made ahead on the second thread are discarded and the interval's are drawn again;
 - ``separate``: the same, each ending restarted by ``advance`` and ``reset`` (two radio runs);
 - ``fresh``: the same weights from scenarios reset with the trainer's seed of the checkpoint's
-  iteration, timed after one collection (its warm-up), as ``stage_throughput.py`` times them.
+  iteration, timed after one collection (its warm-up), as ``benchmarks/stage_throughput.py`` times
+  them.
 
 Per arm: collection seconds (median over its iterations), radio runs per interval, and per
 iteration the intervals at which some scenarios were reset and how many scenarios were. The
@@ -45,7 +47,7 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "steady_state_resets.json"
+RESULTS = Path(__file__).parent / "steady_state_resets.json"
 ARMS = ("run", "reset_first", "separate", "fresh")
 
 

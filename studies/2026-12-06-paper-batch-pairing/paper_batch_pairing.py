@@ -1,11 +1,15 @@
 """Paired learning check of a change of ``experiment=paper``'s vehicle batch shape (or of
 another setting, ``--new-overrides``).
 
-    python benchmarks/paper_batch_pairing.py     # writes results/paper_batch_pairing.json
-    python benchmarks/paper_batch_pairing.py --stages pi_star --seeds 0 --iterations 4 \
+    python studies/2026-12-06-paper-batch-pairing/paper_batch_pairing.py  # writes \
+        paper_batch_pairing.json
+    python studies/2026-12-06-paper-batch-pairing/paper_batch_pairing.py --stages pi_star \
+        --seeds 0 --iterations 4 \
         --eval-every 2 --out /tmp/pairing.json                # a quick look
-    python benchmarks/paper_batch_pairing.py --old 256x100 --new 256x100 \
-        --new-overrides algo.activation=tanh_sigmoid --out results/paper_activation_pairing.json
+    python studies/2026-12-06-paper-batch-pairing/paper_batch_pairing.py --old 256x100 \
+        --new 256x100 \
+        --new-overrides algo.activation=tanh_sigmoid \
+            --out studies/2026-12-06-paper-batch-pairing/paper_activation_pairing.json
 
 Two arms share everything but ``algo.num_envs`` × ``algo.rollout_steps`` (the samples per PPO
 iteration are equal, so iterations compare at equal frames) and the Hydra overrides of
@@ -41,7 +45,7 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "paper_batch_pairing.json"
+RESULTS = Path(__file__).parent / "paper_batch_pairing.json"
 STAGES = ("pi_star", "pi_tilde")
 #: the held-out evaluation's seed (the same scenarios for every arm and seed)
 EVAL_SEED = 10**9 + 7

@@ -2,8 +2,9 @@
 radio): the fast path (``CategoricalMode``, straight from the actor's layers) against the
 actor's own TensorDict path (``ActorPolicy.action``), interleaved in one process.
 
-    python benchmarks/rra_policy_call.py            # writes results/rra_policy_call.json
-    python benchmarks/rra_policy_call.py --batches 64 --repeats 3 --calls 100 --out /tmp/x.json
+    python studies/2026-12-05-rra-policy-call/rra_policy_call.py  # writes rra_policy_call.json
+    python studies/2026-12-05-rra-policy-call/rra_policy_call.py --batches 64 --repeats 3 \
+        --calls 100 --out /tmp/x.json
 
 The RRA actor is the one ``vdtn-marl jocc`` builds (``experiment=smoke``'s network; the sizes of
 the network are those of every experiment). Per batch size B (scenarios; observations
@@ -21,7 +22,7 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "rra_policy_call.json"
+RESULTS = Path(__file__).parent / "rra_policy_call.json"
 
 
 def parse_args(argv=None) -> argparse.Namespace:

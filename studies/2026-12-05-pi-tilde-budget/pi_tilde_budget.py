@@ -1,15 +1,17 @@
 """Where a PPO iteration of π̃ under the learned RRA goes, what compiling its two hot functions
 gives, and the arithmetic it cannot avoid, against the 30-minute JOCC iteration budget.
 
-    python benchmarks/pi_tilde_budget.py           # writes results/pi_tilde_budget.json
-    python benchmarks/pi_tilde_budget.py --batch-sizes 64 --repeats 1 --out /tmp/pt.json
-    python benchmarks/pi_tilde_budget.py --budget-only  # the budget again, from the stored rows
+    python studies/2026-12-05-pi-tilde-budget/pi_tilde_budget.py  # writes pi_tilde_budget.json
+    python studies/2026-12-05-pi-tilde-budget/pi_tilde_budget.py --batch-sizes 64 --repeats 1 \
+        --out /tmp/pt.json
+    python studies/2026-12-05-pi-tilde-budget/pi_tilde_budget.py \
+        --budget-only  # the budget again, from the stored rows
 
 π̃ under the learned RRA is most of a later ``experiment=paper`` JOCC iteration
-(``results/stage_throughput.json``): every control interval runs T = 50 subframes, each one
-call of the RRA policy and one of the subframe kernel. Per batch size B (scenarios, rollout
-25,600 / B intervals, the ``experiment=paper`` loop as ``stage_throughput.py`` builds it, torch
-on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
+(``benchmarks/results/stage_throughput.json``): every control interval runs T = 50 subframes, each
+one call of the RRA policy and one of the subframe kernel. Per batch size B (scenarios, rollout
+25,600 / B intervals, the ``experiment=paper`` loop as ``benchmarks/stage_throughput.py`` builds it,
+torch on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
 
 1. **Paired iterations**, ``--repeats`` pairs, eager then compiled: a PPO iteration (collect +
    update) as the run does it, and the same with the subframe kernel
@@ -28,7 +30,7 @@ on the run's 1 intra-op thread plus the draw-ahead thread), in one process:
    TensorDicts, Python) counts as free. It is a floor for torch on this CPU as long as the
    network's products and activations stay torch's (MKL's GEMM, torch's activation kernels);
    a hand-fused kernel could save the activations' memory passes, not the products.
-3. **The budget**: from ``results/stage_throughput.json`` (its chosen sizes, and under
+3. **The budget**: from ``benchmarks/results/stage_throughput.json`` (its chosen sizes, and under
    ``paper`` the ``experiment=paper`` sizes; a later JOCC iteration), the seconds of every
    other stage, hence the seconds per π̃ iteration that would leave a JOCC iteration within
    30 minutes; the speed-up needed over that file's π̃ and
@@ -45,13 +47,14 @@ import sys
 import time
 from pathlib import Path
 
-HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE))
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = HERE.parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
 import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
 from stage_throughput import CONTROL_FRAMES  # noqa: E402  (π̃'s samples per iteration)
 
-RESULTS = HERE / "results" / "pi_tilde_budget.json"
-STAGES = HERE / "results" / "stage_throughput.json"
+RESULTS = HERE / "pi_tilde_budget.json"
+STAGES = BENCHMARKS / "results" / "stage_throughput.json"
 BUDGET_S = 30 * 60.0
 
 
@@ -300,7 +303,7 @@ def measure(batch: int, repeats: int, calls: int, frames: int = CONTROL_FRAMES) 
 
 
 def _kernel_interval(batch: int):
-    sys.path.insert(0, str(HERE))
+    sys.path.insert(0, str(HERE.parent / "2026-12-04-compile-kernel"))
     import compile_kernel
 
     return compile_kernel.Interval(batch, seed=0)
@@ -309,8 +312,8 @@ def _kernel_interval(batch: int):
 # ---------------------------------------------------------------------- the budget
 def budget(stages_path: Path, rows: list[dict], frames: int = CONTROL_FRAMES) -> dict:
     """The π̃ seconds per iteration that fit a 30-minute later JOCC iteration, from a
-    ``stage_throughput.py`` result, and whether the floor measured here could get there: at
-    that result's fastest sizes (``estimate``), and under ``paper`` at the ``experiment=paper``
+    ``benchmarks/stage_throughput.py`` result, and whether the floor measured here could get there:
+    at that result's fastest sizes (``estimate``), and under ``paper`` at the ``experiment=paper``
     sizes (``estimate_paper``), where the file has them. ``rows`` timed at other than the
     paper's ``frames`` per iteration are not set against it."""
     if frames != CONTROL_FRAMES:
@@ -329,7 +332,7 @@ def budget(stages_path: Path, rows: list[dict], frames: int = CONTROL_FRAMES) ->
 
 
 def _fit(est: dict, rows: list[dict]) -> dict:
-    """:func:`budget` for one estimate of ``stage_throughput.py`` (its batch sizes)."""
+    """:func:`budget` for one estimate of ``benchmarks/stage_throughput.py`` (its batch sizes)."""
     seconds = est["seconds"]
     iterations = est["budgets"]["control_iterations"]
     later = est["later_iteration_s"]

@@ -1,7 +1,9 @@
 """What the learned RRA policy's cheaper deterministic call gives π̃'s PPO iterations.
 
-    python benchmarks/rra_mode_shortcut.py          # writes results/rra_mode_shortcut.json
-    python benchmarks/rra_mode_shortcut.py --batch-sizes 64 --repeats 1 --out /tmp/m.json
+    python studies/2026-12-06-rra-mode-shortcut/rra_mode_shortcut.py  # writes \
+        rra_mode_shortcut.json
+    python studies/2026-12-06-rra-mode-shortcut/rra_mode_shortcut.py --batch-sizes 64 \
+        --repeats 1 --out /tmp/m.json
 
 Under the learned RRA every subframe of π̃'s radio calls the RRA policy once, for the mode of
 its Categorical (:func:`vdtn_marl.algos.networks.categorical_mode`). The call as shipped (1)
@@ -11,9 +13,9 @@ instead of a logsumexp, a softmax and a max, and (2) reads the network's weights
 interval's radio (``ActorPolicy.bound``) instead of at every call. The reference arm is the
 call without both: no shortcut, the weights read at every call.
 
-Per batch size B (the ``experiment=paper`` loop as ``stage_throughput.py`` builds it, rollout
-25,600 / B intervals, torch on the run's 1 intra-op thread plus the draw-ahead thread), in one
-process: ``--repeats`` interleaved pairs of whole PPO iterations (collect + update), the
+Per batch size B (the ``experiment=paper`` loop as ``benchmarks/stage_throughput.py`` builds it,
+rollout 25,600 / B intervals, torch on the run's 1 intra-op thread plus the draw-ahead thread), in
+one process: ``--repeats`` interleaved pairs of whole PPO iterations (collect + update), the
 reference first in even pairs and second in odd ones; the ratio is the median over pairs of
 reference / shipped seconds. The same iterations count the policy's calls, those in which
 some row took the long way (a near tie), and those rows. After each pair, the policy's
@@ -31,12 +33,13 @@ import statistics
 import sys
 from pathlib import Path
 
-HERE = Path(__file__).parent
-sys.path.insert(0, str(HERE))
+HERE = Path(__file__).resolve().parent
+BENCHMARKS = HERE.parents[1] / "benchmarks"
+sys.path.insert(0, str(BENCHMARKS))
 import stage_throughput  # noqa: E402  (the sibling script: the stage loop it builds)
 from stage_throughput import CONTROL_FRAMES, timed_iteration  # noqa: E402
 
-RESULTS = HERE / "results" / "rra_mode_shortcut.json"
+RESULTS = HERE / "rra_mode_shortcut.json"
 
 
 def parse_args(argv=None) -> argparse.Namespace:

@@ -1,8 +1,9 @@
 """Cost of the networks' tanh activation (``algo.activation``): the kernels, the RRA policy call
 and the paper-scale training stages, each activation against ``tanh`` in the same run.
 
-    python benchmarks/activation_cost.py           # writes results/activation_cost.json
-    python benchmarks/activation_cost.py --stages none --repeats 3 --out /tmp/act.json
+    python studies/2026-12-03-activation-cost/activation_cost.py  # writes activation_cost.json
+    python studies/2026-12-03-activation-cost/activation_cost.py --stages none --repeats 3 \
+        --out /tmp/act.json
 
 Three parts, each interleaved (every activation, then every activation again, ``--repeats``
 times), timed in process CPU seconds with torch on one thread:
@@ -36,7 +37,7 @@ import tempfile
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "activation_cost.json"
+RESULTS = Path(__file__).parent / "activation_cost.json"
 ROWS = {"rra_stage_call": 128 * 3, "pi_tilde_rra_call": 256 * 3, "ppo_minibatch": 4096 * 3}
 CELLS = 64
 STAGES = ("pi_star", "pi_tilde_learned", "rra")

@@ -4,15 +4,16 @@ thread are kept) against the new episodes' first (``reset(mask, begin=False)`` t
 ``begin_interval()``: the draws made ahead are discarded and the interval's drawn again on the
 main thread).
 
-    python benchmarks/restart_draws.py                # writes results/restart_draws.json
-    python benchmarks/restart_draws.py --batch-sizes 256 --repeats 1 --out /tmp/rd.json
+    python studies/2026-12-06-restart-draws/restart_draws.py  # writes restart_draws.json
+    python studies/2026-12-06-restart-draws/restart_draws.py --batch-sizes 256 --repeats 1 \
+        --out /tmp/rd.json
 
 Per batch size a default (platoon4) twin (draws ahead from
 ``link.DRAW_AHEAD_MIN_BATCH`` scenarios) runs ``--intervals`` intervals of random RRA actions
 and a CACC close; after each, ``--fraction`` of its scenarios (at least one) restart with the
 rest's next interval, as π̃'s persisting scenarios do at about half of their intervals
-(``benchmarks/steady_state_resets.py``). Only the restart is timed (wall seconds), so the
-noise of the subframes around it stays out. The two orders run ``--repeats`` times,
+(``studies/2026-12-06-steady-state-resets/steady_state_resets.py``). Only the restart is timed (wall
+seconds), so the noise of the subframes around it stays out. The two orders run ``--repeats`` times,
 alternating which goes first, each from the same seed: the same scenarios restart at the same
 intervals in both. The table gives the median milliseconds per restart either way and the
 median over repeats of (new episodes first / interval first).
@@ -26,7 +27,7 @@ import statistics
 import time
 from pathlib import Path
 
-RESULTS = Path(__file__).parent / "results" / "restart_draws.json"
+RESULTS = Path(__file__).parent / "restart_draws.json"
 ORDERS = ("interval_first", "episodes_first")
 
 
