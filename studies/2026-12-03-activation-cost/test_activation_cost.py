@@ -18,8 +18,6 @@ def _script(name: str):
     return module
 
 
-
-
 activation = _script("activation_cost.py")
 
 
