@@ -11,6 +11,7 @@ one CSV); pandas infers the compression from the file name. pandas is imported l
 
 from __future__ import annotations
 
+import logging
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
@@ -46,10 +47,25 @@ SPEED_COLUMNS = (
 """The speed columns a ``time,speed`` CSV may have (exactly one of them)."""
 MAX_SPEED_MPS = 70.0
 """Highest speed accepted from a file (252 km/h); anything faster is taken as a unit mix-up."""
+PLAUSIBLE_MAX_SPEED_MPS = 45.0
+"""A speed column read as m/s whose maximum is above this (162 km/h) draws a warning: road
+vehicles rarely drive so fast, and km/h read as m/s look like this."""
+PLAUSIBLE_MEDIAN_SPEED_MPS = 36.0
+"""Likewise for a median above this (130 km/h, the highest common motorway limit)."""
+DUPLICATE_TOL_S = 1e-6
+"""A sample whose time is within this (s) of the previous sample's repeats its timestamp."""
+DUPLICATE_SPEED_TOL_MPS = 0.5
+"""How far (m/s) the speeds of rows repeating a timestamp may differ: within it they are one
+sample recorded twice (rounding aside) and pre-processing keeps the first; beyond it the file
+contradicts itself and is refused."""
+MAX_LISTED_ROWS = 10
+"""At most this many row numbers are listed in a warning (then how many more)."""
 NGSIM_FRAME_PERIOD_S = 0.1
 HIGHD_FRAME_RATE_HZ = 25.0
 
 _COMPRESSION_SUFFIXES = (".gz", ".bz2", ".xz", ".zst", ".zip", ".tar")
+
+_log = logging.getLogger(__name__)
 
 
 @dataclass(eq=False)
@@ -202,6 +218,94 @@ def _check_speeds(path: Path, speed_mps: np.ndarray, rows: np.ndarray, hint: str
     raise TraceFormatError(path, int(rows[first]) + 1, problem)
 
 
+def _listed(rows: Sequence[int]) -> str:
+    """``rows 3, 8 and 12`` (at most :data:`MAX_LISTED_ROWS`, then how many more)."""
+    shown = [str(r) for r in rows[:MAX_LISTED_ROWS]]
+    more = len(rows) - len(shown)
+    if more:
+        return f"rows {', '.join(shown)} and {more} more"
+    if len(shown) == 1:
+        return f"row {shown[0]}"
+    return f"rows {', '.join(shown[:-1])} and {shown[-1]}"
+
+
+def _check_repeated_times(
+    path: Path,
+    profiles: Sequence[SpeedProfile],
+    rows_of: dict[str, np.ndarray],
+    unit: str,
+    to_mps: float,
+    vehicle_of: dict[str, str] | None = None,
+) -> None:
+    """Refuse rows that repeat a timestamp with a different speed; say which repeat it with
+    the same speed (they are dropped by :func:`~vdtn_marl.data.preprocess.preprocess`).
+
+    ``rows_of`` maps each profile's ``vehicle_id`` to its samples' 0-based data rows,
+    ``unit``/``to_mps`` are the file's speed unit and its factor to m/s (for the message),
+    ``vehicle_of`` names the vehicle of each profile in a file of several."""
+    repeated: list[int] = []
+    for p in profiles:
+        t, v, rows = p.time_s, p.speed_mps, rows_of[p.vehicle_id]
+        if len(t) < 2:
+            continue
+        keep = np.concatenate([[True], np.diff(t) > DUPLICATE_TOL_S])
+        if keep.all():
+            continue
+        first = np.maximum.accumulate(np.where(keep, np.arange(len(t)), 0))
+        dup = np.flatnonzero(~keep)
+        apart = np.abs(v[dup] - v[first[dup]])
+        bad = dup[apart > DUPLICATE_SPEED_TOL_MPS + 1e-9]
+        if bad.size:
+            i, j = int(bad[0]), int(first[bad[0]])
+            who = f"vehicle {vehicle_of[p.vehicle_id]}, " if vehicle_of else ""
+            more = f" ({bad.size - 1} more such rows)" if bad.size > 1 else ""
+            raise TraceFormatError(
+                path,
+                None,
+                f"{who}rows {int(rows[j]) + 1} and {int(rows[i]) + 1} share the time "
+                f"{t[i]:g} s but not the speed: {v[j] / to_mps:.4g} and {v[i] / to_mps:.4g} "
+                f"{unit}, {abs(v[i] - v[j]):.3g} m/s apart (allowed: rows repeating a time "
+                f"may differ by at most {DUPLICATE_SPEED_TOL_MPS:g} m/s; the first is kept)"
+                f"{more}; remove the wrong row",
+            )
+        repeated.extend(int(r) + 1 for r in rows[dup])
+    if repeated:
+        _log.warning(
+            "%s: %s repeat the time of the row before (speeds within %g m/s); pre-processing "
+            "keeps the first row of each time and drops %s",
+            path.name,
+            _listed(sorted(repeated)),
+            DUPLICATE_SPEED_TOL_MPS,
+            "it" if len(repeated) == 1 else "them",
+        )
+
+
+def _check_plausible_mps(path: Path, speed_mps: np.ndarray, column: str) -> None:
+    """Warn when a column read as m/s looks like km/h: a maximum above
+    :data:`PLAUSIBLE_MAX_SPEED_MPS` or a median above :data:`PLAUSIBLE_MEDIAN_SPEED_MPS`."""
+    if not speed_mps.size:
+        return
+    top, median = float(speed_mps.max()), float(np.median(speed_mps))
+    if top <= PLAUSIBLE_MAX_SPEED_MPS and median <= PLAUSIBLE_MEDIAN_SPEED_MPS:
+        return
+    _log.warning(
+        "%s: column %r is read as m/s, but its speeds reach %.4g m/s (%.0f km/h) with a "
+        "median of %.3g m/s (%.0f km/h), faster than road vehicles drive (plausible: a maximum "
+        "up to %g m/s, a median up to %g m/s); they look like km/h (%.4g km/h = %.3g m/s): if "
+        "so, name the column speed_kmh",
+        path.name,
+        column,
+        top,
+        top * 3.6,
+        median,
+        median * 3.6,
+        PLAUSIBLE_MAX_SPEED_MPS,
+        PLAUSIBLE_MEDIAN_SPEED_MPS,
+        top,
+        top / 3.6,
+    )
+
+
 def _group_by_vehicle(keys: np.ndarray, frame: np.ndarray) -> Iterable[tuple[Any, np.ndarray]]:
     """Yield ``(key, row indices sorted by frame)`` per vehicle, in order of first appearance."""
     codes, uniques = _pandas().factorize(keys)  # codes number keys by first appearance
@@ -264,7 +368,9 @@ def load_ngsim(
     optional ``Location`` column (the combined release) becomes part of the id. Column names
     are matched without case. Rows are grouped per vehicle and ordered by ``Frame_ID`` (the
     releases are not always sorted); time is ``(Frame_ID - first Frame_ID) · frame_period_s``.
-    Duplicate frames are kept for :func:`~vdtn_marl.data.preprocess.preprocess` to drop.
+    Duplicate frames are kept for :func:`~vdtn_marl.data.preprocess.preprocess` to drop, and
+    named in a warning; a vehicle's frame repeated with a speed more than
+    :data:`DUPLICATE_SPEED_TOL_MPS` apart is refused (:class:`TraceFormatError`).
 
     Args:
         vehicle_ids: keep only these vehicles (raw ``Vehicle_ID`` values or full ids).
@@ -295,13 +401,16 @@ def load_ngsim(
         keys = np.array([f"{loc}/{v}" for loc, v in pairs], dtype=object)
     else:
         keys = raw_ids
-    out = []
+    out, rows_of, vehicle_of = [], {}, {}
     for key, idx in _group_by_vehicle(keys, frame):
         t = (frame[idx] - frame[idx[0]]) * frame_period_s
         vid = f"{prefix}/{key}" if prefix else str(key)
         source = f"NGSIM trajectories ({path.name})"
         out.append((raw_ids[idx[0]], SpeedProfile(t, speed[idx], vid, source)))
-    return _select(out, vehicle_ids, min_duration_s, speed_range_mps)
+        rows_of[vid], vehicle_of[vid] = idx, str(key)
+    kept = _select(out, vehicle_ids, min_duration_s, speed_range_mps)
+    _check_repeated_times(path, kept, rows_of, "ft/s", FT_TO_M, vehicle_of)
+    return kept
 
 
 def load_highd(
@@ -332,12 +441,15 @@ def load_highd(
     _check_speeds(path, speed, np.arange(len(speed)), "highD xVelocity must be in m/s")
     prefix = file_stem(path) if id_prefix is None else id_prefix
     raw_ids = np.array([_raw_id(v) for v in cols["id"]], dtype=object)
-    out = []
+    out, rows_of, vehicle_of = [], {}, {}
     for key, idx in _group_by_vehicle(raw_ids, frame):
         t = (frame[idx] - frame[idx[0]]) / frame_rate_hz
         vid = f"{prefix}/{key}" if prefix else str(key)
         out.append((key, SpeedProfile(t, speed[idx], vid, f"highD-style tracks ({path.name})")))
-    return _select(out, vehicle_ids, min_duration_s, speed_range_mps)
+        rows_of[vid], vehicle_of[vid] = idx, str(key)
+    kept = _select(out, vehicle_ids, min_duration_s, speed_range_mps)
+    _check_repeated_times(path, kept, rows_of, "m/s", 1.0, vehicle_of)
+    return kept
 
 
 def load_time_speed_csv(
@@ -352,9 +464,13 @@ def load_time_speed_csv(
     Headers: ``time``/``time_s`` (s), and exactly one speed column whose header gives its
     unit: ``speed``/``speed_mps`` (m/s), ``speed_kmh``/``speed_kph`` (km/h) or ``speed_mph``
     (mph; the bundled EPA cycles are stored so). Other columns are ignored. Time must be
-    non-decreasing (repeated times are allowed and later dropped by
-    :func:`~vdtn_marl.data.preprocess.preprocess`); a speed above 70 m/s or below 0 is rejected
-    as a likely unit mix-up. ``vehicle_id`` defaults to the file name without extensions.
+    non-decreasing (a repeated time is allowed when its speed is within
+    :data:`DUPLICATE_SPEED_TOL_MPS` of the row before: a warning names the rows, which
+    :func:`~vdtn_marl.data.preprocess.preprocess` drops; further apart it is refused); a speed
+    above 70 m/s or below 0 is rejected as a likely unit mix-up, and an m/s column whose
+    maximum exceeds :data:`PLAUSIBLE_MAX_SPEED_MPS` or whose median exceeds
+    :data:`PLAUSIBLE_MEDIAN_SPEED_MPS` draws a warning that it may hold km/h. ``vehicle_id``
+    defaults to the file name without extensions.
     ``min_duration_s`` and ``speed_range_mps`` select as in :func:`load_ngsim` (the list is
     empty when the drive does not pass them).
     """
@@ -387,9 +503,15 @@ def load_time_speed_csv(
         else f"check that column {column.headers[0]!r} really holds {column.unit}"
     )
     _check_speeds(path, v, np.arange(len(v)), hint)
+    if column.to_mps == 1.0:
+        header = [str(c).strip() for c in _header(path)]
+        named = next((h for h in header if h.lower() in column.headers), column.headers[0])
+        _check_plausible_mps(path, v, named)
     vid = file_stem(path) if vehicle_id is None else vehicle_id
     profile = SpeedProfile(t, v, vid, f"time,speed CSV ({path.name}, {column.unit})")
-    return _select([(vid, profile)], None, min_duration_s, speed_range_mps)
+    kept = _select([(vid, profile)], None, min_duration_s, speed_range_mps)
+    _check_repeated_times(path, kept, {vid: np.arange(len(t))}, column.unit, column.to_mps)
+    return kept
 
 
 LOADERS = {"ngsim": load_ngsim, "highd": load_highd, "csv": load_time_speed_csv}

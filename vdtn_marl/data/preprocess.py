@@ -3,7 +3,8 @@
 :func:`preprocess` runs these steps, in order, and reports each in a :class:`PreprocessReport`:
 
 1. **Duplicates.** Samples whose time equals the previous sample's (within 1 µs) are dropped;
-   the first is kept.
+   the first is kept. (The file readers of :mod:`~vdtn_marl.data.loaders` name such rows in
+   a warning, and refuse a file whose rows repeat a time with speeds more than 0.5 m/s apart.)
 2. **Gaps.** The nominal step is the median time step. A step longer than 1.5 × nominal is a
    gap (a lost frame or more). Gaps up to ``max_gap_s`` are bridged by the linear
    interpolation of step 3; longer gaps split the profile into segments, which get ids
@@ -37,12 +38,11 @@ from typing import Literal
 
 import numpy as np
 
-from vdtn_marl.data.loaders import MAX_SPEED_MPS, SpeedProfile
+from vdtn_marl.data.loaders import DUPLICATE_TOL_S, MAX_SPEED_MPS, SpeedProfile
 
 Smoothing = Literal["savgol", "ema", "none"]
 GAP_FACTOR = 1.5
 """A time step longer than this multiple of the nominal step counts as a gap."""
-DUPLICATE_TOL_S = 1e-6
 DEFAULT_MIN_SEGMENT_S = 5.0
 """The shortest stretch (s) :func:`preprocess` keeps by default."""
 DEFAULT_CLIP_ACCEL_MPS2 = (-2.6, 2.6)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import inspect
+import logging
 import re
 from collections.abc import Iterable, Sequence
 from dataclasses import replace
@@ -46,6 +47,9 @@ EVAL_MODULUS = 5
 
 Part = Literal["train", "eval", "all"]
 TooShort = Literal["raise", "reflect"]
+ACTUATOR_LIMITS = "the followers' actuator limits"
+
+_log = logging.getLogger(__name__)
 
 
 def split_key(vehicle_id: str) -> str:
@@ -199,15 +203,39 @@ def load_profiles(
     return split(profiles, part)
 
 
+def clipping_note(
+    cleaning: dict[str, Any] | None, where: str, keep: str, why: str = ACTUATOR_LIMITS
+) -> str | None:
+    """One line when pre-processing clipped a file's acceleration (``cleaning``: what
+    :func:`load_trace_source` and the like record as ``source.preprocessing``), else None:
+    ``where`` names the file, ``why`` says what the band is, ``keep`` how to keep the
+    recorded acceleration."""
+    if not cleaning or not cleaning.get("accel_points_clipped"):
+        return None
+    lo, hi = cleaning["clip_accel_mps2"]
+    return (
+        f"{where}: pre-processing clipped the acceleration of "
+        f"{cleaning['accel_points_clipped']} of {cleaning['output_points']} samples to "
+        f"[{lo:g}, {hi:g}] m/s² ({why}): the largest deceleration "
+        f"{-cleaning['accel_min_before_mps2']:.2f} m/s² became "
+        f"{-cleaning['accel_min_after_mps2']:.2f} m/s², the largest acceleration "
+        f"{cleaning['accel_max_before_mps2']:.2f} became "
+        f"{cleaning['accel_max_after_mps2']:.2f}; {keep}"
+    )
+
+
 def _read_clean(
     kind: str,
     path: str | Path,
     clean: bool,
     preprocess_kw: dict[str, Any] | None,
     loader_kw: dict[str, Any],
+    warn_clipping: bool = True,
 ) -> tuple[list[SpeedProfile], dict[str, Any] | None]:
     """The file's profiles, cleaned if ``clean``, and what cleaning changed
-    (:func:`~vdtn_marl.data.preprocess.summarize_reports`; ``None`` when not cleaned)."""
+    (:func:`~vdtn_marl.data.preprocess.summarize_reports`; ``None`` when not cleaned). A
+    warning (:func:`clipping_note`) says when the acceleration was clipped, unless
+    ``warn_clipping`` is false (the CLI gives its own, naming its setting)."""
     try:
         loader = LOADERS[kind]
     except KeyError:
@@ -230,6 +258,16 @@ def _read_clean(
     summary["min_segment_s"] = float(kw.get("min_segment_s", DEFAULT_MIN_SEGMENT_S))
     band = kw.get("clip_accel_mps2", DEFAULT_CLIP_ACCEL_MPS2)
     summary["clip_accel_mps2"] = None if band is None else [float(b) for b in band]
+    if warn_clipping:
+        default = band is not None and tuple(band) == tuple(DEFAULT_CLIP_ACCEL_MPS2)
+        note = clipping_note(
+            summary,
+            str(path),
+            "preprocess_kw={'clip_accel_mps2': None} keeps the recorded ones",
+            ACTUATOR_LIMITS if default else "preprocess_kw's clip_accel_mps2",
+        )
+        if note:
+            _log.warning(note)
     return profiles, summary
 
 
@@ -248,7 +286,9 @@ def load_trace_source(
     whose profiles all land in one part of the split (one drive) is split in time.
 
     Example: ``load_trace_source("ngsim", "trajectories-0750am-0805am.csv", part="train",
-    min_duration_s=60, speed_range_mps=(5, 30))``.
+    min_duration_s=60, speed_range_mps=(5, 30))``. When pre-processing clips the
+    acceleration, one warning names the file and how many samples changed
+    (:func:`clipping_note`); ``source.preprocessing`` holds the figures.
     """
     if part not in ("train", "eval", "all"):
         raise ValueError(f"part={part!r} must be 'train', 'eval' or 'all'")
@@ -265,10 +305,11 @@ def _selected_profiles(
     clean: bool,
     preprocess_kw: dict[str, Any] | None,
     loader_kw: dict[str, Any],
+    warn_clipping: bool = True,
 ) -> tuple[list[SpeedProfile], dict[str, Any] | None]:
     """Every profile of the file that passes selection and cleaning (raises if none does),
     and what cleaning changed (as :func:`_read_clean`)."""
-    profiles, cleaning = _read_clean(kind, path, clean, preprocess_kw, loader_kw)
+    profiles, cleaning = _read_clean(kind, path, clean, preprocess_kw, loader_kw, warn_clipping)
     if profiles:
         return profiles, cleaning
     name = Path(path).name
@@ -481,14 +522,19 @@ def load_train_eval_sources(
     too_short: TooShort = "raise",
     clean: bool = True,
     preprocess_kw: dict[str, Any] | None = None,
+    warn_clipping: bool = True,
     **loader_kw: Any,
 ) -> tuple[ProfileTraceSource, ProfileTraceSource]:
     """Training and evaluation sources from one file, read once (arguments as in
     :func:`load_trace_source`).
 
-    The parts are those of :func:`train_eval_parts`.
+    The parts are those of :func:`train_eval_parts`. When pre-processing clips the
+    acceleration, one warning says so (:func:`clipping_note`), unless ``warn_clipping`` is
+    false (the CLI gives its own, which names its setting).
     """
-    profiles, cleaning = _selected_profiles(kind, path, clean, preprocess_kw, loader_kw)
+    profiles, cleaning = _selected_profiles(
+        kind, path, clean, preprocess_kw, loader_kw, warn_clipping
+    )
     parts, how = train_eval_parts(profiles)
     train, evaluation = (
         _file_source(kind, path, parts[part], f"part={part}, {how}", too_short, cleaning)

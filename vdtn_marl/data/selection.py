@@ -29,6 +29,7 @@ from vdtn_marl.data.profiles import (
     TIME_SPLIT_TRAIN_FRACTION,
     DisjointWindowSource,
     ProfileTraceSource,
+    clipping_note,
     load_train_eval_sources,
     time_split_sources,
     vehicle_split_sources,
@@ -221,18 +222,10 @@ def accel_band(
 def preprocessing_note(source: object, trace_path: str | None) -> str | None:
     """One line when pre-processing clipped the acceleration of the trace file ``source`` was
     read from (what changed, and the setting that keeps the recorded one), else None."""
-    report = getattr(source, "preprocessing", None)
-    if not report or not report.get("accel_points_clipped"):
-        return None
-    lo, hi = report["clip_accel_mps2"]
-    return (
-        f"scenario.trace_path={trace_path!r}: pre-processing clipped the "
-        f"acceleration of {report['accel_points_clipped']} of {report['output_points']} samples "
-        f"to [{lo:g}, {hi:g}] m/s² (the followers' actuator limits): the largest deceleration "
-        f"{-report['accel_min_before_mps2']:.2f} m/s² became "
-        f"{-report['accel_min_after_mps2']:.2f} m/s², the largest acceleration "
-        f"{report['accel_max_before_mps2']:.2f} became {report['accel_max_after_mps2']:.2f}; "
-        "scenario.trace_accel_clip=none keeps the recorded ones"
+    return clipping_note(
+        getattr(source, "preprocessing", None),
+        f"scenario.trace_path={trace_path!r}",
+        "scenario.trace_accel_clip=none keeps the recorded ones",
     )
 
 
@@ -266,4 +259,7 @@ def _read(
 ) -> tuple[ProfileTraceSource, ProfileTraceSource]:
     """Cached per file version and band (the sources are stateless: draws come from the
     caller)."""
-    return load_train_eval_sources(kind, path, preprocess_kw={"clip_accel_mps2": band})
+    # the run warns of clipping itself (preprocessing_note), naming its setting
+    return load_train_eval_sources(
+        kind, path, preprocess_kw={"clip_accel_mps2": band}, warn_clipping=False
+    )
