@@ -23,8 +23,7 @@ validation batch, and the noise and minibatches draw from a generator seeded wit
 seed, so a warm start is repeatable and leaves the global torch RNG alone (except for the
 trainer's observation-scaling rollout, when it has not run yet).
 
-Measured (``benchmarks/training.py``, 3 rounds × 32 scenarios × 10 s, ≈ 100 s on one CPU
-thread): see docs/training.md.
+What it costs and gives: docs/training.md.
 """
 
 from __future__ import annotations

@@ -53,9 +53,8 @@ class Tanh(nn.Tanh):
 
 class SigmoidTanh(nn.Module):
     """tanh(x) computed as 2·sigmoid(2x) − 1 (the identity is exact; the float32 results
-    differ from ``torch.tanh``'s by at most a few 1e-7). On the CPUs measured, torch's sigmoid
-    kernel is several times faster than its tanh kernel, so at the shapes of an RRA policy
-    call this activation costs a fraction of ``nn.Tanh`` (benchmarks/activation_cost.py)."""
+    differ from ``torch.tanh``'s by at most a few 1e-7), from torch's sigmoid kernel
+    (``algo.activation=tanh_sigmoid``)."""
 
     @staticmethod
     def function(x: torch.Tensor) -> torch.Tensor:

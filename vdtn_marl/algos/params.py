@@ -8,9 +8,8 @@ from dataclasses import dataclass
 #: values of ``algo.activation``, the hidden layers' activation of every actor and critic
 #: (:data:`vdtn_marl.algos.networks.ACTIVATION_CLASSES` builds them): ``tanh`` is torch.tanh;
 #: ``tanh_sigmoid`` is the same function computed as 2·sigmoid(2x) − 1, from torch's sigmoid
-#: kernel, several times faster than its tanh kernel on the CPUs measured
-#: (benchmarks/activation_cost.py); it differs from torch.tanh by at most a few 1e-7
-#: (absolute), so results differ in the last bits
+#: kernel; it differs from torch.tanh by at most a few 1e-7 (absolute), so results differ in
+#: the last bits
 ACTIVATIONS = ("tanh", "tanh_sigmoid")
 #: the most worker processes of ``algo.collector_workers`` (vdtn_marl/algos/shards.py)
 MAX_COLLECTOR_WORKERS = 64
@@ -48,10 +47,9 @@ class AlgoConfig:
     max_grad_norm: float = 1.0
     epochs: int = 4  # PPO epochs per collected batch
     # torch CPU threads of each PPO update (GAE and the minibatch passes), the run's
-    # ``threads`` restored after it; 0: the run's ``threads`` throughout. The update's tensors
-    # are large enough for a second thread to pay, the collection's are not
-    # (benchmarks/two_cores.py); a thread count other than the run's moves results in the last
-    # bits (torch splits its sums and products over the threads)
+    # ``threads`` restored after it; 0: the run's ``threads`` throughout. A thread count other
+    # than the run's moves results in the last bits (torch splits its sums and products over
+    # the threads)
     update_threads: int = 0
     # worker processes that collect the vehicle stages' persisting scenarios (π*, π̃), each
     # num_envs / N of them on one core (vdtn_marl/algos/shards.py); 0: the trainer's process.

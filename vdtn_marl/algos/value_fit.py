@@ -2,10 +2,8 @@
 
 The ``td`` IVoI estimator values states with π*'s critic (docs/model.md §5). That critic is
 trained on the states π* itself visits, with perfect observations; the states the acting
-system (π̃ on impaired observations, under the current RRA policy) visits lie elsewhere, and
-there the critic's IVoI is uncorrelated with a trace-exact rollout of π*
-(``benchmarks/results/ivoi_estimator_error.json``). This module fits a copy of the critic on
-those states, the seed's open problem answered as the issue on JOCC fidelity suggests:
+system (π̃ on impaired observations, under the current RRA policy) visits lie elsewhere, where
+nothing trains the critic. This module fits a copy of the critic on those states:
 
 1. **States.** The acting system runs ``episodes`` scenarios of the training traces for
    ``intervals`` intervals (:func:`~vdtn_marl.algos.evaluate.evaluate_system`), once under the

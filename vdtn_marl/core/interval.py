@@ -170,8 +170,7 @@ class IntervalEngine:
         one start: what :meth:`advance` ``(going)`` and :meth:`reset` ``(~going)`` do, with one
         interval start and one radio run of the whole batch instead of a masked start and
         radio run for each group. A run's scenarios persist across PPO iterations, so their
-        episodes end at different intervals (a collision, the episode's length), and at about
-        half of π̃'s intervals some end (``benchmarks/steady_state_resets.py``).
+        episodes end at different intervals (a collision, the episode's length).
 
         The same model, other random numbers: the interval's draws come first (those made
         ahead on the twin's second thread are kept) and the new episodes' (traces, initial

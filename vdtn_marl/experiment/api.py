@@ -8,7 +8,7 @@ continues an interrupted run from its last checkpoint. Each logs (logger
 metrics when it ends.
 
 Scripts get one more: :func:`loaded_checkpoints` (the loops of trained checkpoints, for the
-measurements in ``benchmarks/``).
+scripts in ``benchmarks/`` and ``studies/``).
 """
 
 from __future__ import annotations

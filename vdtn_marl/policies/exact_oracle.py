@@ -36,12 +36,9 @@ about 1.2 s per scenario for H = 200 intervals (10 s) and 2.4 s with the default
 optimum to float32 precision (tests/policies/test_exact_oracle.py). The loop over scenarios is a
 Python loop (one LP each), outside the simulator's hot path.
 
-With the 6 s tail, the exact optimum cost 0.0381 per follower and interval on the 128
-synthetic scenarios of ``benchmarks/training.py`` (where
 :class:`~vdtn_marl.policies.mpc_oracle.OracleController`, the receding-horizon MPC with a
-subgradient solver, cost 0.0453: 19 % more), and 0.046 on 8 UDDS scenarios (the MPC: 0.065,
-42 % more, and more than CACC's 0.055). That MPC is therefore not the lower bound its name
-suggests; see docs/training.md.
+subgradient solver, stays above this optimum, so it is not the lower bound its name suggests;
+docs/training.md and docs/control_vs_oracle.md give the measured gaps.
 """
 
 from __future__ import annotations
@@ -58,9 +55,8 @@ from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.twin import DigitalTwin
 
 #: HiGHS methods and options tried in turn until one solves a scenario's program. Presolve
-#: can end in "numerical difficulties" (status 4) on programs that solve without it: one of
-#: 64 held-out UDDS scenarios (`benchmarks/training.py --traces udds --episodes 64`) failed
-#: with both methods and solved with presolve off, to the same optimum under both methods.
+#: can end in "numerical difficulties" (status 4) on programs that solve without it, so the
+#: last attempts turn it off (the same optimum under both methods).
 LP_ATTEMPTS: tuple[tuple[str, dict], ...] = (
     ("highs-ipm", {}),
     ("highs-ds", {}),

@@ -47,30 +47,16 @@ def _intra_op_threads(threads: int | None, device: torch.device):
 ORACLE_MPC_ITERATIONS = 400
 """Adam steps per interval of the oracle (:class:`OracleController`'s default, ``control=oracle``).
 
-On perfect observation, held-out scenarios × 10 s, against the exact optimum of
-:class:`~vdtn_marl.policies.exact_oracle.ExactOracleController`: 128 synthetic scenarios
-(``benchmarks/training.py``), 400 steps +1.3 % (0.03862 vs 0.03814; 408 s on one CPU thread of
-a machine busy with other runs) and 60 steps +18.6 %; 32 synthetic scenarios, 200 steps +3.8 %
-and 400 steps +0.26 % (0.02887 vs 0.02879); 16 scenarios of the stop-and-go UDDS cycle (data
-extra), 400 steps +3.6 % (0.01758 vs 0.01698), where 60 steps were 42 % above on 8 and worse
-than CACC; on the held-out last 20 % of the EPA cycles (π* trained on the first 80 %), 400
-steps +7.1 % on UDDS and +1.2 % on HWFET with 64 scenarios each
-(``benchmarks/results/training_udds_64.json``, ``training_hwfet_64.json``; +5.3 % and +0.2 %
-with 16). The 400-step figures on 32 scenarios and on the whole UDDS cycle (measured before
-recorded sets were split in time) come from ``python benchmarks/training.py --warm-starts ''
---preview-s '' --fps-iterations 0 --episodes N [--traces udds] --quick``. Leaderboard 1.0 and
-reduced 2.0 ran 60 steps (``control.mpc_iterations=60`` reproduces them)."""
+More steps come closer to the exact optimum of
+:class:`~vdtn_marl.policies.exact_oracle.ExactOracleController`, each step at about the same
+cost; docs/control_vs_oracle.md gives the measured gaps (``benchmarks/training.py``).
+Leaderboard 1.0 and reduced 2.0 ran 60 steps (``control.mpc_iterations=60`` reproduces them)."""
 
 CAUSAL_MPC_ITERATIONS = 200
 """Adam steps per interval of the ``causal_mpc`` baseline (and so of the ``warm_start`` teacher).
 
-Fewer steps stop well short of the optimum: on 8 synthetic scenarios × 10 s
-(perfect observation) the oracle cost 0.0557 at 60 steps, 0.0445 at 200 and 0.0434 at 400
-against the exact optimum's 0.0432, and the causal MPC 0.0621 at 60 and 0.0544 at 200. π*
-imitating the 200-step causal MPC scored 0.0521 on the 128 scenarios of
-``benchmarks/training.py`` before any PPO (the 60-step teacher, after PPO: 0.0564, same
-seed); a 400-step teacher gave 0.0525. Each step costs about the same, so 200 steps take
-about 3× as long as 60."""
+Fewer steps stop further short of the optimum; each step costs about the same. The measured
+costs of the baselines and of π* imitating them: docs/control_vs_oracle.md."""
 
 
 class OracleController:

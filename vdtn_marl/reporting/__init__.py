@@ -1,6 +1,7 @@
 """Reporting of run results: tables (:mod:`.tables`), plots (:mod:`.plots`), the summary of a
 sweep (:mod:`.sweep`, ``vdtn-marl bench summarize``) and the helpers the scripts in
-``benchmarks/`` share (:mod:`.benchmarking`: option lists, provenance, CIs, console).
+``benchmarks/`` and ``studies/`` share (:mod:`.benchmarking`: option lists, provenance, CIs,
+console).
 
 Above the trainers and below the experiment: a run writes its plots and prints its tables
 through it, and it knows nothing of how a run is trained. The names of :mod:`.tables`,

@@ -1,6 +1,6 @@
-"""Helpers shared by the scripts in ``benchmarks/``: comma-separated option lists that fail
-with a message naming the flag and the value, the provenance block of a results JSON, means
-with their CIs, the description of a measured checkpoint's run and a console for tables.
+"""Helpers shared by the scripts in ``benchmarks/`` and ``studies/``: comma-separated option
+lists that fail with a message naming the flag and the value, the provenance block of a results
+JSON, means with their CIs, the description of a measured checkpoint's run and a console for tables.
 (The loops of trained checkpoints come from
 :func:`vdtn_marl.experiment.api.loaded_checkpoints`.)"""
 
