@@ -81,12 +81,8 @@ def write_run_plots(
 
 
 def format_table(row: dict[str, Any]) -> str:
-    """A plain two-column table of an evaluation row (units are in the metric names)."""
-    width = max(len(k) for k in row)
-    lines = [f"{'metric':<{width}}  value", f"{'-' * width}  -----"]
-    for key, value in row.items():
-        if key == "config" or isinstance(value, dict):
-            continue
-        text = f"{value:.4g}" if isinstance(value, float) else str(value)
-        lines.append(f"{key:<{width}}  {text}")
-    return "\n".join(lines)
+    """A run's summary as plain text, grouped with units as the CLI prints it
+    (:func:`~vdtn_marl.reporting.tables.format_summary`)."""
+    from vdtn_marl.reporting.tables import format_summary
+
+    return format_summary(row)

@@ -201,17 +201,212 @@ def print_table(table: Any, console: Any = None, title: str | None = None) -> No
     console.print(rich_table)
 
 
+# --- one run's summary on the terminal ------------------------------------------------------
+
+#: The groups of a run's printed summary, in order (:func:`summary_sections`).
+SUMMARY_SECTIONS = ("run", "training", "control", "radio", "VoI", "reference check", "timing")
+
+#: The unit (or what a number counts) of a summary key, by its flattened name; a key ending in
+#: ``.seconds`` or ``_seconds`` is in s. Keys without an entry are names, flags or counts.
+SUMMARY_UNITS = {
+    "kappa1": "RRA reward weight",
+    "kappa2": "RRA reward weight",
+    "iterations": "JOCC iterations",
+    "warm_start.rounds": "rounds",
+    "warm_start.samples": "samples",
+    "warm_start.rms_error_mps2": "m/s²",
+    "critic_warmup.batches": "batches",
+    "critic_warmup.loss_critic": "MSE of returns",
+    "critic_warmup.explained_variance": "fraction",
+    "control_return": "discounted return per follower",
+    "control_cost": "−reward per follower-interval",
+    "optimal_control_cost": "−reward per follower-interval",
+    "cacc_control_cost": "−reward per follower-interval",
+    "gap_error_abs_m": "m",
+    "speed_error_abs_mps": "m/s",
+    "collision_rate": "fraction of scenarios",
+    "cam_delivery_rate": "fraction of CAMs sent",
+    "cam_latency_ms_mean": "ms, delivered CAMs",
+    "cam_latency_ms_p50": "ms, delivered CAMs",
+    "cam_latency_ms_p95": "ms, delivered CAMs",
+    "aoi_ms_mean": "ms",
+    "peak_aoi_ms_mean": "ms",
+    "v2i_throughput_mbps_per_link": "Mbps per V2I link",
+    "ivoi_mean": "ξ (unscaled)",
+    "ivoi_std": "ξ (unscaled)",
+    "ivoi_mean_delivered": "ξ (unscaled)",
+    "ivoi_mean_lost": "ξ (unscaled)",
+    "ivoi_sum": "ξ summed per scenario",
+    "evoi": "J̃ − J*, discounted return",
+}
+
+#: What the terms of the summary mean, printed under the table where their keys are shown.
+SUMMARY_TERMS = {
+    "aoi_ms_mean": "AoI (Age of Information): at each recipient, the time since the newest CAM "
+    "it holds was generated, sampled every subframe and averaged over all of them "
+    "(docs/model.md §4.8)",
+    "peak_aoi_ms_mean": "peak AoI: the AoI just before each refresh (a delivered CAM replacing "
+    "the held one), averaged over the delivered CAMs",
+    "cam_latency_ms_mean": "CAM latency: over the delivered CAMs only (a lost CAM has none)",
+    "evoi": "EVoI: J̃ − J*, the acting system's discounted control return minus that of π* on "
+    "perfect observations, on the same scenarios (below 0: the acting system does worse)",
+    "ivoi_mean": "IVoI ξ: the estimator's value of one follower's CAM in one interval",
+    "pi_star_minus_cacc": "J* − J: π*'s discounted control return minus the comparator's, on the "
+    "same scenarios (reference_ok is False where π* is worse)",
+}
+
+#: Keys (flattened) of each group, by name or by prefix (``name.``); the first group whose
+#: rule matches wins; a key no group names goes to ``run``.
+_SECTION_KEYS = (
+    ("timing", ("seconds", "eval_seconds")),
+    (
+        "training",
+        (
+            "iterations",
+            "trainer_iterations",
+            "selected_iterations",
+            "warm_start",
+            "critic_warmup",
+            "rra_warm_start",
+            "term_scales",
+            "value_fit",
+        ),
+    ),  # fmt: skip
+    (
+        "control",
+        (
+            "control_return",
+            "control_cost",
+            "optimal_control_cost",
+            "cacc_control_cost",
+            "gap_error_abs_m",
+            "speed_error_abs_mps",
+            "collision_rate",
+        ),
+    ),  # fmt: skip
+    (
+        "radio",
+        (
+            "cam_delivery_rate",
+            "cam_latency_ms_mean",
+            "cam_latency_ms_p50",
+            "cam_latency_ms_p95",
+            "aoi_ms_mean",
+            "peak_aoi_ms_mean",
+            "v2i_throughput_mbps_per_link",
+        ),
+    ),  # fmt: skip
+    ("VoI", ("evoi", "ivoi_mean", "ivoi_std", "ivoi_mean_delivered", "ivoi_mean_lost", "ivoi_sum")),
+    ("reference check", ("pi_star_minus_", "reference_ok", "reference_problems")),
+)
+
+#: The groups of metrics: a metric that is None (undefined, or not scored) is shown as ``-``,
+#: while metadata that is None (not set in this run) is left out.
+_METRIC_SECTIONS = ("control", "radio", "VoI", "reference check")
+
+
+def _section_of(key: str) -> str:
+    if key.endswith((".seconds", "_seconds")):
+        return "timing"
+    for section, names in _SECTION_KEYS:
+        for name in names:
+            if (
+                key == name
+                or key.startswith(f"{name}.")
+                or (name.endswith("_") and key.startswith(name))
+            ):
+                return section
+    return "run"
+
+
+def _unit_of(key: str) -> str:
+    if key in SUMMARY_UNITS:
+        return SUMMARY_UNITS[key]
+    if key.endswith((".seconds", "_seconds")) or key == "seconds":
+        return "s"
+    if key.startswith("trainer_iterations.") or key.startswith("selected_iterations."):
+        return "trainer iterations"
+    if key.startswith("pi_star_minus_") and not key.endswith(("_ci_low", "_ci_high")):
+        return "J* − J, discounted return"
+    return ""
+
+
+def summary_sections(summary: Mapping[str, Any]) -> list[tuple[str, list[tuple[str, str, str]]]]:
+    """A run's summary grouped for the terminal: ``[(group, [(key, value, unit), ...]), ...]``
+    in the order of :data:`SUMMARY_SECTIONS`, groups without entries left out. Keys are those
+    of ``summary.json`` (flattened, ``warm_start.samples``); a ``key`` with ``key_ci_low`` and
+    ``key_ci_high`` is one row, ``value [low, high]`` (its 95% CI over scenarios); lists
+    (plots, notes) and metadata that is None are left out."""
+    flat = {
+        k: v for k, v in flatten(metrics_of(summary)).items() if not isinstance(v, list | tuple)
+    }
+    groups: dict[str, list[tuple[str, str, str]]] = {s: [] for s in SUMMARY_SECTIONS}
+    for key, value in flat.items():
+        if key.endswith(("_ci_low", "_ci_high")) and key.rpartition("_ci_")[0] in flat:
+            continue  # shown with its mean
+        section = _section_of(key)
+        if value is None and section not in _METRIC_SECTIONS:
+            continue
+        text = _format_cell(value)
+        low, high = flat.get(f"{key}_ci_low"), flat.get(f"{key}_ci_high")
+        unit = _unit_of(key)
+        if value is not None and (low is not None or high is not None):
+            text += f" [{_format_cell(low)}, {_format_cell(high)}]"
+        if key == "reference_problems" and value == "":
+            text = "none"
+        groups[section].append((key, text, unit))
+    return [(s, rows) for s, rows in groups.items() if rows]
+
+
+def summary_terms(summary: Mapping[str, Any]) -> list[str]:
+    """The definitions (:data:`SUMMARY_TERMS`) of the terms whose keys the summary shows."""
+    flat = flatten(metrics_of(summary))
+    return [text for key, text in SUMMARY_TERMS.items() if key in flat]
+
+
+def format_summary(summary: Mapping[str, Any]) -> str:
+    """A run's summary as plain text (:func:`summary_sections`): one block per group, then the
+    definitions of the terms shown."""
+    sections = summary_sections(summary)
+    rows = [row for _, group in sections for row in group]
+    if not rows:
+        return ""
+    width = max(len(key) for key, _, _ in rows)
+    value_width = max(len(value) for _, value, _ in rows)
+    lines: list[str] = [f"{'quantity (summary.json key)':<{width + 2}}  value [95% CI]  unit"]
+    for section, group in sections:
+        lines.append(f"\n{section}:")
+        for key, value, unit in group:
+            lines.append(f"  {key:<{width}}  {value:>{value_width}}  {unit}".rstrip())
+    terms = summary_terms(summary)
+    if terms:
+        lines += ["", *terms]
+    return "\n".join(lines)
+
+
 def print_summary(summary: Mapping[str, Any], console: Any = None, title: str = "summary") -> None:
-    """Print the scalar entries of one run's summary as a two-column rich table."""
+    """Print one run's summary as a rich table grouped as :func:`summary_sections` does, with
+    a unit column, and under it the definitions of the terms shown (AoI, peak AoI, EVoI, ...)."""
     from rich.console import Console
     from rich.table import Table
+    from rich.text import Text
 
-    console = console or Console()
+    # piped output (logs, CI) is not cut at rich's default 80 columns
+    console = console or Console(width=None if sys.stdout.isatty() else 120)
     rich_table = Table(title=title)
-    rich_table.add_column("metric", overflow="fold")
-    rich_table.add_column("value", justify="right", overflow="fold")  # a path wraps, never cut
-    for key, value in flatten(metrics_of(summary)).items():
-        if isinstance(value, list | tuple):
-            continue
-        rich_table.add_row(key, _format_cell(value))
+    sections = summary_sections(summary)
+    # the keys stay whole (no_wrap: the other columns wrap first); a value never is cut
+    rich_table.add_column("quantity (summary.json key)", no_wrap=True)
+    rich_table.add_column(
+        "value [95% CI]", justify="right", overflow="fold"
+    )  # a path wraps, never cut
+    rich_table.add_column("unit", overflow="fold")
+    for i, (section, rows) in enumerate(sections):
+        if i:
+            rich_table.add_section()
+        rich_table.add_row(Text(section, style="bold"), "", "")
+        for key, value, unit in rows:  # Text: a value is never read as rich markup
+            rich_table.add_row(Text(f"  {key}"), Text(value), Text(unit))
     console.print(rich_table)
+    for term in summary_terms(summary):
+        console.print(term, markup=False, highlight=False)
