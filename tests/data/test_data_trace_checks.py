@@ -163,3 +163,13 @@ def test_the_cli_path_leaves_the_clipping_warning_to_the_run(tmp_path, caplog):
     train, _ = file_sources("csv", str(path))
     assert train.preprocessing["accel_points_clipped"] > 0
     assert _warnings(caplog) == []
+
+
+def test_a_run_reading_a_file_twice_warns_of_it_once(tmp_path, caplog):
+    # a run checks its file with the default band and may train with none (trace_accel_clip)
+    t, v = _drive()
+    path = _csv(tmp_path / "again.csv", np.insert(t, 3, t[2]), np.insert(v, 3, v[2]))
+    caplog.set_level(logging.WARNING)
+    file_sources("csv", str(path))
+    file_sources("csv", str(path), clip_accel_mps2=None)
+    assert len(_warnings(caplog)) == 1

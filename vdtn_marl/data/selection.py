@@ -19,6 +19,9 @@ traces either way.
 
 from __future__ import annotations
 
+import contextlib
+import logging
+from collections.abc import Iterator
 from functools import lru_cache
 from pathlib import Path
 
@@ -258,8 +261,32 @@ def _read(
     kind: str, path: str, mtime_ns: int, size: int, band: tuple[float, ...] | None
 ) -> tuple[ProfileTraceSource, ProfileTraceSource]:
     """Cached per file version and band (the sources are stateless: draws come from the
-    caller)."""
+    caller); what the reader warns of is said once per file version, whatever the band."""
     # the run warns of clipping itself (preprocessing_note), naming its setting
-    return load_train_eval_sources(
-        kind, path, preprocess_kw={"clip_accel_mps2": band}, warn_clipping=False
-    )
+    with _said_once((path, mtime_ns, size)):
+        return load_train_eval_sources(
+            kind, path, preprocess_kw={"clip_accel_mps2": band}, warn_clipping=False
+        )
+
+
+_SAID: set[tuple[object, ...]] = set()
+
+
+@contextlib.contextmanager
+def _said_once(version: tuple[object, ...]) -> Iterator[None]:
+    """Drop the readers' warnings already given for this file version in this process (a
+    run reads a file for its checks with one band and may train with another)."""
+
+    def first_time(record: logging.LogRecord) -> bool:
+        key = (*version, record.getMessage())
+        if key in _SAID:
+            return False
+        _SAID.add(key)
+        return True
+
+    reader = logging.getLogger("vdtn_marl.data.loaders")
+    reader.addFilter(first_time)
+    try:
+        yield
+    finally:
+        reader.removeFilter(first_time)
