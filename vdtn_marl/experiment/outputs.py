@@ -72,12 +72,24 @@ def write_run_plots(
         )
         written.append(
             plots.plot_latency_cdf(
-                {label: acting.cam_latency_ms},
+                {latency_label(label, acting): acting.cam_latency_ms},
                 pp.control_interval_s * 1000.0,
                 run_dir / plots.LATENCY_CDF_FILE,
             )
         )
     return [str(p) for p in written]
+
+
+def latency_label(label: str, acting: Any) -> str:
+    """The legend label of a run's latency CDF: how many CAMs it is over (the delivered ones)
+    and, where the evaluation reports it, their share of the CAMs sent."""
+    latencies = acting.cam_latency_ms
+    count = 0 if latencies is None else int(latencies.numel())
+    text = f"{label}: {count} delivered CAMs"
+    rate = (getattr(acting, "metrics", None) or {}).get("cam_delivery_rate")
+    if isinstance(rate, int | float):
+        text += f", {100 * rate:.1f}% of those sent"
+    return text
 
 
 def format_table(row: dict[str, Any]) -> str:
