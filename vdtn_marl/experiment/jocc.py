@@ -199,101 +199,127 @@ class JointOptimisation:
             # small per-step tensors: one thread avoids oversubscription, and parallel sweep
             # jobs on one machine do not fight over cores
             torch.set_num_threads(cfg.threads)
-        torch.manual_seed(cfg.seed)
-        algo, control, rra = cfg.algo, cfg.control, cfg.rra
-        self.control_learned = control.name == "learned"
-        self.rra_learned = rra.learned
-        self.gamma = algo.gamma
+        torch.manual_seed(cfg.seed)  # the trainers below draw their weights in this order
+        self.control_learned = cfg.control.name == "learned"
+        self.rra_learned = cfg.rra.learned
+        self.gamma = cfg.algo.gamma
         self.train_traces, self.eval_traces = trace_sources(cfg)
         note = preprocessing_note(self.train_traces, cfg.scenario.trace_path)
         if note:
             _log.warning(note)
         env_kw: dict[str, Any] = dict(
-            batch_size=algo.num_envs, device=self.device, seed=cfg.seed,
+            batch_size=cfg.algo.num_envs, device=self.device, seed=cfg.seed,
             trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
         )  # fmt: skip
-        cacc = CACCController(self.params.platoon)
-        make_trainer = trainer_class(algo.name)  # vdtn_marl/algos/trainer.py: ALGORITHMS
-
-        self.pi_star = make_trainer(
-            VDTNTorchRLEnv("control", **env_kw),
-            "vehicle",
-            dataclasses.replace(algo, validate_every=control.pi_star_validate_every),
-            seed=cfg.seed * 8,
-            prior=cacc,
-            env_factory=TrainingEnvFactory("control", env_kw),
-        )
         self._user_policies: dict[str, Any] = {}  # rra=policy, control=policy: built once
+        # 1. π*, the reference: the controller on perfect observations
+        self.pi_star = self._make_pi_star(env_kw)
+        # 2. π̃, the acting controller, on what the RRA policy in the slot delivers
         self.rra_slot = SwitchablePolicy(self.rra_policy(untrained=True))
-        drop = () if control.augmentation else AUGMENTATION_FEATURES
-        completion_kw = dict(
+        self.completion = make_completion(
+            cfg.control.completion, cfg.control.completion_predictor, self.params.platoon
+        )
+        self.pi_tilde = self._make_pi_tilde(env_kw)
+        # 3. the IVoI estimator on π*; rra.value_fit=acting: the td estimator's v* is a copy of
+        # π*'s critic fitted on the acting system's states before each RRA stage
+        # (value_fit.py), π*'s own is unchanged
+        self.v_fit = copy.deepcopy(self.pi_star.critic) if cfg.rra.value_fit == "acting" else None
+        self.estimator = self.ivoi_estimator(cfg.rra.ivoi_estimator, baseline=cfg.rra.ivoi_baseline)
+        # 4. the RRA agents: κ1·g per subframe, κ2·ξ at the interval's end
+        self.rra = self._make_rra(env_kw) if self.rra_learned else None
+        # 5. where the loop stands, and its logs
+        self.position = {"iteration": 0, "stage": 0, "stage_start": None}
+        self._open_logs()
+        self.last_evaluation: dict[str, Any] | None = None
+        self.videos: dict[str, Path] = {}  # the last evaluation's, by stem (video=true)
+        self.video_indices: dict[str, int] = {}  # and the held-out scenario each shows
+
+    def _completion_kwargs(self) -> dict[str, Any]:
+        control = self.cfg.control
+        return dict(
             completion=control.completion, completion_predictor=control.completion_predictor
         )
-        self.completion = make_completion(
-            control.completion, control.completion_predictor, self.params.platoon
+
+    def _make_pi_star(self, env_kw: dict[str, Any]) -> Trainer:
+        """π*: PPO on perfect observations, keeping its best policy by validation
+        (``control.pi_star_validate_every``)."""
+        cfg = self.cfg
+        return trainer_class(cfg.algo.name)(  # vdtn_marl/algos/trainer.py: ALGORITHMS
+            VDTNTorchRLEnv("control", **env_kw),
+            "vehicle",
+            dataclasses.replace(cfg.algo, validate_every=cfg.control.pi_star_validate_every),
+            seed=cfg.seed * 8,
+            prior=CACCController(self.params.platoon),
+            env_factory=TrainingEnvFactory("control", env_kw),
         )
-        self.pi_tilde = make_trainer(
+
+    def _make_pi_tilde(self, env_kw: dict[str, Any]) -> Trainer:
+        """π̃: PPO on the observations the RRA policy in :attr:`rra_slot` delivers, completed
+        by ``control.completion``; without ``control.augmentation`` it does not see the CAM's
+        delay and age."""
+        cfg = self.cfg
+        completion_kw = self._completion_kwargs()
+        return trainer_class(cfg.algo.name)(
             VDTNTorchRLEnv("control_impaired", rra_policy=self.rra_slot, **completion_kw, **env_kw),
             "vehicle",
-            algo,
+            cfg.algo,
             seed=cfg.seed * 8 + 1,
-            drop_features=drop,
-            prior=cacc,
+            drop_features=() if cfg.control.augmentation else AUGMENTATION_FEATURES,
+            prior=CACCController(self.params.platoon),
             env_factory=TrainingEnvFactory(
                 "control_impaired", {**completion_kw, **env_kw}, self.params, cfg.seed
             ),
         )
-        # rra.value_fit=acting: the td estimator's v* is a copy of π*'s critic fitted on the
-        # acting system's states before each RRA stage (value_fit.py); π*'s own is unchanged
-        self.v_fit = copy.deepcopy(self.pi_star.critic) if rra.value_fit == "acting" else None
-        self.estimator = self.ivoi_estimator(rra.ivoi_estimator, baseline=rra.ivoi_baseline)
-        self.rra = None
-        if self.rra_learned:
-            rra_env = VDTNTorchRLEnv(
-                "rra",
-                **{**env_kw, "batch_size": algo.rra_num_envs},
-                control_module=SwitchablePolicy(self.control_policy()),
-                reward=rra.name,
-                kappa1=rra.kappa1,
-                kappa2=rra.kappa2_value,
-                ivoi_estimator=self.estimator,
-                throughput_scale=rra.throughput_scale,
-                ivoi_scale=rra.ivoi_scale,
-                miss_penalty=rra.miss_penalty,
-                aoi_scale=rra.aoi_scale,
-                burn_in_intervals=algo.rra_burn_in_intervals,
-                **completion_kw,
-            )
-            policy = rra_env.control_module.policy
-            if hasattr(policy, "bind"):  # oracle, causal_mpc: they read the twin's true state
-                rra_env.control_module.policy = policy.bind(rra_env.twin)
-            gamma, lmbda = algo.rra_subframe_discounts(self.params.platoon.subframes_per_interval)
-            bits_left = rra_env.twin.rra_layout.bits_left
-            self.rra = make_trainer(
-                rra_env,
-                "rra",
-                dataclasses.replace(algo, validate_every=rra.validate_every),
-                seed=cfg.seed * 8 + 2,
-                rollout_steps=algo.rra_rollout_steps,
-                gamma=gamma,
-                lmbda=lmbda,
-                # a link whose CAM is delivered is silent: its action has no effect
-                active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
-            )
-        self.position = {"iteration": 0, "stage": 0, "stage_start": None}
-        # TensorBoard, W&B, MLflow beside the CSV tables (experiment.loggers), opened on the
-        # first row; the two logs share them
+
+    def _make_rra(self, env_kw: dict[str, Any]) -> Trainer:
+        """The RRA agents: PPO per subframe under the acting control policy, rewarded by
+        ``rra.name``'s reward (:mod:`vdtn_marl.core.reward`) with the IVoI of
+        :attr:`estimator`."""
+        cfg = self.cfg
+        algo, rra = cfg.algo, cfg.rra
+        rra_env = VDTNTorchRLEnv(
+            "rra",
+            **{**env_kw, "batch_size": algo.rra_num_envs},
+            control_module=SwitchablePolicy(self.control_policy()),
+            reward=rra.name,
+            kappa1=rra.kappa1,
+            kappa2=rra.kappa2_value,
+            ivoi_estimator=self.estimator,
+            throughput_scale=rra.throughput_scale,
+            ivoi_scale=rra.ivoi_scale,
+            miss_penalty=rra.miss_penalty,
+            aoi_scale=rra.aoi_scale,
+            burn_in_intervals=algo.rra_burn_in_intervals,
+            **self._completion_kwargs(),
+        )
+        policy = rra_env.control_module.policy
+        if hasattr(policy, "bind"):  # oracle, causal_mpc: they read the twin's true state
+            rra_env.control_module.policy = policy.bind(rra_env.twin)
+        gamma, lmbda = algo.rra_subframe_discounts(self.params.platoon.subframes_per_interval)
+        bits_left = rra_env.twin.rra_layout.bits_left
+        return trainer_class(algo.name)(
+            rra_env,
+            "rra",
+            dataclasses.replace(algo, validate_every=rra.validate_every),
+            seed=cfg.seed * 8 + 2,
+            rollout_steps=algo.rra_rollout_steps,
+            gamma=gamma,
+            lmbda=lmbda,
+            # a link whose CAM is delivered is silent: its action has no effect
+            active=(lambda obs: obs[..., bits_left] > 0) if algo.rra_mask_silent else None,
+        )
+
+    def _open_logs(self) -> None:
+        """The CSV tables, and TensorBoard, W&B, MLflow beside them (``experiment.loggers``),
+        opened on the first row; the two logs share them."""
         self.loggers = RunLoggers(
-            cfg.experiment.loggers,
+            self.cfg.experiment.loggers,
             self.run_dir,
-            run_name=f"{task} {self.run_dir.resolve().parent.name}/{self.run_dir.name}",
-            hparams=flatten(to_dict(cfg)),
+            run_name=f"{self.task} {self.run_dir.resolve().parent.name}/{self.run_dir.name}",
+            hparams=flatten(to_dict(self.cfg)),
         )
         self.train_log = MetricsLog(self.run_dir, loggers=self.loggers)
         self.eval_log = MetricsLog(self.run_dir, filename=EVALUATION_FILE, loggers=self.loggers)
-        self.last_evaluation: dict[str, Any] | None = None
-        self.videos: dict[str, Path] = {}  # the last evaluation's, by stem (video=true)
-        self.video_indices: dict[str, int] = {}  # and the held-out scenario each shows
 
     # ------------------------------------------------------------------ policies
     def control_policy(self):
