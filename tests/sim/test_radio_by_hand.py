@@ -47,6 +47,12 @@ fail on the paths named, and the bug reverted):
   twin's ``delivered = delay <= t`` in ``finish_interval`` written ``delay < t``: the recipient
   keeps its old content, two intervals old instead of one; or the infos' ``t_sub <= limit``
   written ``<``), with both backends.
+- ``test_evaluation_counts_a_deadline_subframe_cam_as_delivered``: the same in the evaluation's
+  CAM delivery rate and latency (``in_time = delay <= t`` in ``evaluate_system`` written
+  ``delay < t``: a delivery rate of 0 instead of 0.5).
+
+Not covered here: the copies of the deadline rule in the TorchRL face's ``cam_delivered`` info
+and in the interval engine's ``lost`` flag for the RRA reward.
 """
 
 from __future__ import annotations
@@ -58,7 +64,9 @@ import numpy as np
 import pytest
 import torch
 
+from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.envs.control import interval_infos
+from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim import link
 from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES
 from vdtn_marl.sim.params import RadioParams, TwinParams
@@ -335,3 +343,27 @@ def test_twin_counts_a_deadline_subframe_cam_as_delivered(backend):
     # follower 1 holds CAM_0 (one interval, 50 ms, old); follower 2 still the initial content,
     # counted as sent one interval before CAM_0: 100 ms
     assert age.tolist() == pytest.approx([50.0, 100.0])
+
+
+def test_evaluation_counts_a_deadline_subframe_cam_as_delivered(monkeypatch):
+    """The evaluation's CAM delivery rate and latency on the twin of
+    :func:`test_twin_counts_a_deadline_subframe_cam_as_delivered` (its hand tables in every
+    interval, link 0 at 20 dBm on sub-channel 0, link 1 silent): link 0's CAM arrives in
+    subframe 50 of every interval, link 1's never, so half the CAMs are delivered, each 50 ms
+    after it was generated."""
+    params = TwinParams.from_overrides(
+        num_vehicles=3, num_subchannels=2, subchannel_bandwidth_hz=1e6,
+        v2v_power_levels_dbm=(20.0, 10.0), noise_power_override_dbm=-120.0,
+        cam_size_bits=49_500, episode_intervals=3,
+    )  # fmt: skip
+    t = params.platoon.subframes_per_interval
+    monkeypatch.setattr(
+        link, "build_interval_tables", lambda *args, **kwargs: _hand_tables("torch", t, [1e-14] * 2)
+    )
+    result = evaluate_system(
+        params, CACCController(params.platoon), lambda obs: torch.tensor([[CH0, OFF]]),
+        perfect=False, episodes=1, intervals=3, seed=0, trace_source="constant",
+    )  # fmt: skip
+    assert result.metrics["cam_delivery_rate"] == pytest.approx(0.5)
+    assert result.metrics["cam_latency_ms_mean"] == pytest.approx(50.0)
+    assert result.cam_latency_ms.tolist() == [50.0] * 3
