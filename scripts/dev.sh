@@ -4,6 +4,8 @@
 #   bash scripts/dev.sh setup          create .venv and install the pinned, tested versions
 #   bash scripts/dev.sh run [ARGS]     setup, then vdtn-marl jocc ARGS (the default experiment)
 #   bash scripts/dev.sh test [ARGS]    setup, then ruff check . and python -m pytest -q ARGS
+#   bash scripts/dev.sh fast [ARGS]    the same without the tests marked slow (the loop while
+#                                      editing: model and unit tests, a few minutes)
 #   bash scripts/dev.sh bench [ARGS]   setup, then python benchmarks/throughput.py ARGS
 #
 # Works from any directory (it changes to the repository root) and needs only Python >= 3.10.
@@ -33,6 +35,8 @@ commands:
            in constraints.txt; a no-op when nothing changed since the last setup
   run      setup, then the default JOCC experiment: vdtn-marl jocc [OVERRIDES]
   test     setup, then ruff check . and python -m pytest -q [ARGS]
+  fast     setup, then ruff check . and python -m pytest -q -m "not slow" [ARGS]: the model
+           and unit tests, without the subprocess, training and leaderboard runs
   bench    setup, then python benchmarks/throughput.py --out outputs/benchmarks/throughput.json
            [ARGS] (pass --out benchmarks/results/throughput.json to update the record)
 EOF
@@ -133,6 +137,13 @@ case "$command" in
     "$VENV_PY" -m ruff check .
     say "pytest"
     exec "$VENV_PY" -m pytest -q "$@"
+    ;;
+  fast)
+    cmd_setup
+    say "ruff check ."
+    "$VENV_PY" -m ruff check .
+    say "pytest -m 'not slow'"
+    exec "$VENV_PY" -m pytest -q -m "not slow" "$@"
     ;;
   bench)
     cmd_setup

@@ -31,7 +31,10 @@ from vdtn_marl.cli import prepass as cli_prepass
 from vdtn_marl.experiment import config
 
 # Our conf/hydra/launcher/*.yaml carry the launchers' schema names (see vdtn_marl/cli/app.py).
-pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
+pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
+    pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema"),
+]
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = Path(sys.executable).with_name("vdtn-marl")
@@ -327,6 +330,7 @@ def _prevalidate(command: str, overrides: list[str]) -> None:
 #: what an option needs besides itself: the user's own policy names one (control=policy, rra=policy)
 USER_POLICIES = """
 from vdtn_marl.policies import CACCController, make_rra_baseline
+
 
 
 def control(params, seed):

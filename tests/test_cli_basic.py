@@ -11,6 +11,8 @@ import pytest
 import vdtn_marl
 from vdtn_marl import cli
 
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
+
 BUILTIN_IDS = tuple(env_id for env_id in vdtn_marl.list_envs() if env_id.startswith("vdtn/"))
 """Every built-in id, from the registry (tests/test_registry.py pins the list itself)."""
 

@@ -22,7 +22,10 @@ from vdtn_marl import cli
 from vdtn_marl.cli import help as cli_help
 from vdtn_marl.cli import prepass as cli_prepass
 
-pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
+pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
+    pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema"),
+]
 
 
 def _compose(overrides: list[str]) -> dict:

@@ -19,7 +19,10 @@ from vdtn_marl.experiment.config import FIXED_CONTROLS, FIXED_RRA
 from vdtn_marl.policies import CACCController, make_rra_baseline
 from vdtn_marl.sim.params import TwinParams
 
-pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
+pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
+    pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema"),
+]
 
 SMOKE = ("experiment=smoke", "progress=false")
 #: the radio's metrics, absent where the radio is off (π* on perfect observations)
@@ -164,6 +167,7 @@ def test_evaluation_raw_holds_pi_stars_scenarios_where_there_is_one(tmp_path):
 
 POLICY = """
 from vdtn_marl.policies import make_rra_baseline
+
 
 
 def greedy(params, seed):

@@ -17,7 +17,10 @@ from vdtn_marl.io.files import LOCK_FILE
 from vdtn_marl.io.loggers import RunLoggers
 from vdtn_marl.io.metrics import MetricsLog
 
-pytestmark = pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema")
+pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
+    pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema"),
+]
 
 
 def _run_with_wandb(run_dir: Path) -> None:

@@ -26,6 +26,8 @@ from vdtn_marl.errors import RunFileError, RunWriteError
 from vdtn_marl.experiment.jocc import JointOptimisation
 from vdtn_marl.io.files import LOCK_FILE, atomic_write_text, run_lock
 
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
+
 ROOT = Path(__file__).resolve().parents[1]
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200", "OMP_NUM_THREADS": "1"}
 RUN = [

@@ -17,6 +17,8 @@ from vdtn_marl.experiment.jocc import trace_sources
 from vdtn_marl.sim.params import ConfigError
 from vdtn_marl.sim.twin import resolve_device
 
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
+
 
 def _write_trace(path, duration_s=120.0, vehicles=("",)):
     """A ``time,speed`` CSV (one vehicle) of 0.1 s samples, speeds in m/s."""

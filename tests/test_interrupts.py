@@ -14,7 +14,10 @@ from pathlib import Path
 
 import pytest
 
-pytestmark = pytest.mark.skipif(os.name != "posix", reason="POSIX signals")
+pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
+    pytest.mark.skipif(os.name != "posix", reason="POSIX signals"),
+]
 
 SCRIPT = Path(sys.executable).with_name("vdtn-marl")
 ENV = {**os.environ, "PYTHONUNBUFFERED": "1", "COLUMNS": "200", "OMP_NUM_THREADS": "1"}

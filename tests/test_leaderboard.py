@@ -560,6 +560,7 @@ def test_finished_cell_with_another_config_is_an_error(tmp_path):
     assert leaderboard.complete_summary(tmp_path, data) is None
 
 
+@pytest.mark.slow
 def test_a_cell_finished_before_aoi_was_reported_stays_finished(tmp_path):
     """A summary without the metrics that came later (AoI) is a finished cell: resuming a
     benchmark does not run it again, and its runs are left out of those columns only."""
@@ -610,6 +611,7 @@ def _strict_json(path: Path):
     return json.loads(path.read_text(encoding="utf-8"), parse_constant=no_constant)
 
 
+@pytest.mark.slow
 def test_smoke_writes_statistics_with_ordered_intervals(smoke):
     cfg = smoke["cfg"]
     data = _strict_json(smoke["report"] / leaderboard.STATS_JSON)
@@ -650,6 +652,7 @@ def test_smoke_writes_statistics_with_ordered_intervals(smoke):
             assert math.isfinite(run[key])
 
 
+@pytest.mark.slow
 def test_smoke_writes_marl_eval_json_and_csv(smoke):
     b = smoke["cfg"].benchmark
     raw = _strict_json(smoke["report"] / leaderboard.MARL_EVAL_JSON)
@@ -675,6 +678,7 @@ def test_smoke_writes_marl_eval_json_and_csv(smoke):
         assert len(list(csv.DictReader(handle))) == smoke["cells"]
 
 
+@pytest.mark.slow
 def test_smoke_writes_markdown_and_plots(smoke):
     b = smoke["cfg"].benchmark
     text = (smoke["report"] / leaderboard.REPORT_FILE).read_text(encoding="utf-8")
@@ -711,6 +715,7 @@ def test_smoke_writes_markdown_and_plots(smoke):
         assert (cell / name).is_file(), name
 
 
+@pytest.mark.slow
 def test_smoke_videos_show_the_trace_methods_best_and_worst_held_out_scenario(smoke, tmp_path):
     """video=true: per scenario and trace method, the first seed's run evaluated again on the
     same held-out scenarios; its best and worst scenario (by the acting system's control
@@ -736,6 +741,7 @@ def test_smoke_videos_show_the_trace_methods_best_and_worst_held_out_scenario(sm
     assert not list(tmp_path.glob("*.tmp*")) and not list(smoke["report"].glob("*.gif"))
 
 
+@pytest.mark.slow
 def test_smoke_resume_skips_finished_cells(smoke):
     cfg = smoke["cfg"]
     summaries = sorted(smoke["out"].rglob("summary.json"))
@@ -777,6 +783,7 @@ def test_smoke_resume_skips_finished_cells(smoke):
     assert f"0 cell(s) run now, {smoke['cells']} already complete" in again.stdout
 
 
+@pytest.mark.slow
 def test_script_forwards_to_the_cli():
     result = subprocess.run(
         [sys.executable, str(ROOT / "benchmarks" / "leaderboard.py"), "--help"],

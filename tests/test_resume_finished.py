@@ -11,6 +11,8 @@ import pytest
 from vdtn_marl.io.files import read_json
 from vdtn_marl.io.metrics import MetricsLog, parse_cell
 
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
+
 
 @pytest.fixture(scope="module")
 def finished_run(tmp_path_factory):

@@ -16,6 +16,7 @@ from vdtn_marl import cli
 from vdtn_marl.io.files import LOCK_FILE, lock_holder, new_run_stamp, run_lock, run_stamp
 
 pytestmark = [
+    pytest.mark.slow,  # runs of the CLI or of training (the fast loop skips them)
     pytest.mark.filterwarnings("ignore:(?s).*validated against ConfigStore schema"),
     pytest.mark.skipif(os.name != "posix", reason="flock"),
 ]

@@ -144,6 +144,7 @@ def test_loggers_open_on_the_first_scalar(tmp_path, torchrl_csv_loggers):
     assert loggers.opened == []
 
 
+@pytest.mark.slow
 def test_a_jocc_run_sends_each_stage_and_evaluation_to_the_loggers(tmp_path, torchrl_csv_loggers):
     from vdtn_marl.experiment.config import (
         AlgoConfig,

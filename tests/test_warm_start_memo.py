@@ -4,6 +4,7 @@ goes on exactly as the run that computed it."""
 import functools
 from dataclasses import replace
 
+import pytest
 import torch
 
 from vdtn_marl.algos import imitation
@@ -17,6 +18,8 @@ from vdtn_marl.experiment.config import (
     ScenarioConfig,
 )
 from vdtn_marl.experiment.jocc import JointOptimisation
+
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
 
 CFG = RunConfig(
     scenario=ScenarioConfig(episode_intervals=20),

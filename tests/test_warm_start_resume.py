@@ -14,6 +14,8 @@ from vdtn_marl.algos import imitation
 from vdtn_marl.algos.checkpoint import load_checkpoint
 from vdtn_marl.io.interrupts import _Interrupt
 
+pytestmark = pytest.mark.slow  # runs of the CLI or of training (the fast loop skips them)
+
 # A small warm start: per round, 4 intervals of rollouts and 2 ticks of fitting.
 SMALL = {"scenarios": 2, "intervals": 4, "fit_steps": 200}
 INTERRUPT_AT_TICK = 9  # in the rollouts of round 1 (ticks 7 to 10)

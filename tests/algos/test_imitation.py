@@ -21,6 +21,8 @@ from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 
+pytestmark = pytest.mark.slow  # training runs (the fast loop skips them)
+
 ALGO = AlgoConfig(num_envs=8, rollout_steps=10, minibatch_size=128, epochs=2)
 PARAMS = TwinParams.from_overrides(episode_intervals=40)
 SMALL = dict(rounds=2, scenarios=8, intervals=40, fit_steps=1000, minibatch_size=256, lr=3e-3)

@@ -30,6 +30,8 @@ from test_training import (  # noqa: E402
     tiny_config,
 )
 
+pytestmark = pytest.mark.slow  # workers and training (the fast loop skips them)
+
 ALGO = AlgoConfig(num_envs=4, rollout_steps=3, minibatch_size=12, epochs=1, collector_workers=2)
 ENV_KW = {"seed": 0, "episode_intervals": 20}
 

@@ -31,6 +31,8 @@ from vdtn_marl.sim.layout import RRAFeatureLayout
 from vdtn_marl.sim.params import ConfigError, TwinParams
 from vdtn_marl.voi import TDIVoIEstimator
 
+pytestmark = pytest.mark.slow  # training runs (the fast loop skips them)
+
 TINY_ALGO = AlgoConfig(
     num_envs=8,
     rollout_steps=10,

@@ -61,6 +61,7 @@ def test_the_bootstrapped_return_is_the_rollout_plus_the_discounted_tail_value()
     assert perfect_observation(final, params.platoon).shape[-1] == 8
 
 
+@pytest.mark.slow
 def test_a_jocc_run_with_value_fit_fits_a_copy_and_the_estimator_reads_it(tmp_path):
     cfg = tiny_config(
         rra=RRAConfig(value_fit="acting", value_fit_horizon=5),

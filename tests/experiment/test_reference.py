@@ -110,6 +110,7 @@ def test_the_leaderboard_report_lists_the_runs_that_fail():
     assert "passed in all 1 runs" in "\n".join(_reference_lines([], 1))
 
 
+@pytest.mark.slow
 def test_a_run_checks_its_reference_and_the_check_fires_on_a_broken_pi_star(tmp_path, capsys):
     """A smoke JOCC run scores π* against every comparator; with π*'s actor then broken (full
     braking whatever it sees) the same loop's next evaluation fails the check, and the CLI's

@@ -90,6 +90,7 @@ def _same_results(a: dict, b: dict) -> None:
         assert a[key] == b[key] or (a[key] != a[key] and b[key] != b[key]), key
 
 
+@pytest.mark.slow
 def test_an_rra_policy_by_import_path_runs_as_the_baseline_it_builds(policies):
     by_name = _jocc("greedy", "control=cacc", "rra=greedy")
     by_path = _jocc("mine", "control=cacc", "rra=policy", "rra.policy=mypolicies:greedy")
@@ -100,6 +101,7 @@ def test_an_rra_policy_by_import_path_runs_as_the_baseline_it_builds(policies):
     _same_results(by_file, by_name)
 
 
+@pytest.mark.slow
 def test_a_control_policy_by_import_path_runs_as_the_baseline_it_builds(policies):
     by_name = _jocc("cacc", "control=cacc", "rra=greedy")
     by_path = _jocc(
@@ -110,6 +112,7 @@ def test_a_control_policy_by_import_path_runs_as_the_baseline_it_builds(policies
     _same_results(by_path, by_name)
 
 
+@pytest.mark.slow
 def test_the_users_rra_policy_is_what_acts(policies):
     summary = _jocc("off", "control=cacc", "rra=policy", "rra.policy=mypolicies:always_off")
     assert summary["cam_delivery_rate"] == 0.0  # every link silent: no CAM is delivered
@@ -159,6 +162,7 @@ def test_a_plain_module_checkpoint_gives_integer_actions(tmp_path):
     assert torch.all(actions == params.radio.num_power_levels - 1)
 
 
+@pytest.mark.slow
 def test_a_module_checkpoint_runs_in_jocc(tmp_path, monkeypatch):
     params = TwinParams()
     torch.save(_Silent(params.radio.num_power_levels - 1), tmp_path / "silent.pt")
@@ -243,6 +247,7 @@ def test_import_paths_and_files_are_told_apart():
         user_policy.check_policy("vehicle.policy", "pkg:make")
 
 
+@pytest.mark.slow
 def test_bench_scores_a_submission_beside_the_benchmarks_methods(policies):
     submission = "+submissions.mine=['rra=policy','rra.policy=mypolicies:always_off']"
     cells = "cells=[platoon4/mine/seed0,platoon4/greedy/seed0]"
@@ -270,6 +275,7 @@ def test_bench_scores_a_submission_beside_the_benchmarks_methods(policies):
     assert "mine" not in manifest["benchmark"]["methods"] and "mine" in manifest["submissions"]
 
 
+@pytest.mark.slow
 def test_a_control_actor_checkpoint_drives_the_followers(tmp_path, monkeypatch):
     from vdtn_marl.algos.networks import make_actor
     from vdtn_marl.algos.ppo import ActorPolicy

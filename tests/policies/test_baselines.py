@@ -277,6 +277,7 @@ def _control_run(make, batch: int = 8, intervals: int = 100, seed: int = 3) -> t
     return torch.stack(rewards)  # [K, B, F]
 
 
+@pytest.mark.slow
 def test_oracle_beats_cacc_on_the_same_traces():
     cacc = _control_run(lambda twin: make_control_baseline("cacc", twin))
     oracle = _control_run(lambda twin: make_control_baseline("oracle", twin, iterations=60))

@@ -55,6 +55,7 @@ def test_the_plan_replayed_in_the_twin_earns_what_the_program_predicted():
 
 
 @pytest.mark.parametrize("traces", ["synthetic", "constant"])
+@pytest.mark.slow
 def test_no_controller_beats_the_exact_oracle(traces):
     params = _params(traces=traces)
     common = dict(perfect=True, episodes=4, intervals=INTERVALS, seed=11)
@@ -77,6 +78,7 @@ def test_no_controller_beats_the_exact_oracle(traces):
         assert tailed["collision_rate"] == 0.0
 
 
+@pytest.mark.slow
 def test_a_scenario_that_did_not_advance_by_one_interval_plans_afresh():
     twin = DigitalTwin(_params(), batch_size=2, seed=3, radio=False)
     twin.reset(seed=3)
@@ -116,6 +118,7 @@ def test_bad_settings_and_impaired_twins_raise():
         ExactOracleController().bind(twin)(torch.zeros(3, 3, 8))
 
 
+@pytest.mark.slow
 def test_a_program_that_fails_with_presolve_is_solved_without_it(monkeypatch):
     # HiGHS presolve ended in "numerical difficulties" (status 4) on one UDDS scenario that
     # solves without presolve: the oracle must fall back instead of aborting the evaluation
