@@ -244,3 +244,23 @@ def test_the_checked_policy_passes_through_and_counts_bound_calls():
     with pytest.raises(PolicyError, match=r"'mine:make' failed on call 2 .*such as 99"):
         policy.bound()(observation)
     assert calls == [7, "call"]
+
+
+def test_an_rra_action_out_of_range_late_in_a_run_names_the_policy():
+    """Every call's values are checked, not only the first ones: call 1500 of an RRA policy
+    (30 intervals of 50 subframes) returning 16 of 16 actions is named, with its call."""
+    params = TwinParams()
+    count = [0]
+
+    def late(observation):
+        count[0] += 1
+        value = 16 if count[0] == 1500 else 0
+        return torch.full(observation.shape[:-1], value, dtype=torch.long)
+
+    check = user_policy.OutputCheck.of("rra.policy", "mine:late", params)
+    policy = user_policy.CheckedPolicy(late, check)
+    observation = torch.zeros(2, 3, 10)
+    for _ in range(1499):
+        policy(observation)
+    with pytest.raises(PolicyError, match=r"'mine:late' failed on call 1500 .*such as 16"):
+        policy(observation)

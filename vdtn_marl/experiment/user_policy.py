@@ -35,9 +35,8 @@ policy) and have the run's number of agents, and the output must be a tensor of 
 acceleration limits for control. :func:`load_policy` builds the policy for a run, as a
 :class:`CheckedPolicy`: a call that raises or returns what the run cannot use is a
 :class:`~vdtn_marl.errors.PolicyError` naming the policy and the call (shape and dtype are
-checked on every call, and a control policy's values too (it acts once per interval); an RRA
-policy acts every subframe, and its values are checked on its first :data:`CHECKED_CALLS`
-calls, after which the twin still refuses an action out of range, without the policy's name).
+checked on every call, and so are its values: one ``aminmax`` per call, a few µs against a
+subframe's hundreds).
 """
 
 from __future__ import annotations
@@ -61,9 +60,6 @@ POLICY_KEYS: dict[str, tuple[str, str]] = {
 }
 #: the kinds of checkpoint a ``.pt`` file may be (``vdtn`` is a vdtn-marl run's own)
 CHECKPOINT_KINDS = ("module", "benchmarl", "vdtn")
-#: an RRA policy's actions (called every subframe) are checked for range on its first
-#: CHECKED_CALLS calls (20 intervals of 50 subframes), their shape and dtype on every call
-CHECKED_CALLS = 1000
 #: how far a command may pass the acceleration limits (float32 rounding of the limits), m/s²
 ACCEL_TOLERANCE_MPS2 = 1e-5
 #: the scenarios of the observation a policy is called on at validation
@@ -424,8 +420,7 @@ def _dtypes(rra: bool, whole_floats: bool) -> frozenset:
 class CheckedPolicy:
     """A user's policy that says which it is when a call fails: a call that raises, or returns
     what :class:`OutputCheck` refuses, is a :class:`~vdtn_marl.errors.PolicyError` naming the
-    policy and the call. Shape and dtype are checked on every call, and so are a control
-    policy's values; an RRA policy's values on its first :data:`CHECKED_CALLS`. The policy's
+    policy and the call. Shape, dtype and values are checked on every call. The policy's
     own attributes (``seed``, ``rowwise``, ...) are the wrapper's; what ``bind(twin)`` and
     ``bound()`` return is checked too, counting the same calls."""
 
@@ -441,9 +436,7 @@ class CheckedPolicy:
             output = self.policy(observation)
         except Exception as exc:
             self._fail(call, observation, f"raised {type(exc).__name__}: {exc}", exc)
-        # a control policy acts once per interval: its values are checked on every call
-        values = call <= CHECKED_CALLS or not self.check.rra
-        problem = self.check.problem(observation, output, values)
+        problem = self.check.problem(observation, output)
         if problem is not None:
             self._fail(call, observation, problem)
         if self.check.whole_floats:
