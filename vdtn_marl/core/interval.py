@@ -220,6 +220,7 @@ class IntervalEngine:
                 return torch.as_tensor(policy(observation), device=device).long()
 
             twin.run_subframes(rows, act, validated=validated)
+            twin.last_rra_actions = None  # the rows' actions alone: not the batch's
             return
         for _ in range(twin.subframes_per_interval):
             observation = twin.rra_observation()
@@ -232,6 +233,7 @@ class IntervalEngine:
                 chosen = torch.as_tensor(chosen, device=twin.device).long()
                 actions = chosen.new_zeros(observation.shape[:-1]).index_copy_(0, rows, chosen)
             twin.step_subframe(actions, validated=validated, mask=mask)
+        twin.last_rra_actions = actions  # the last subframe's, for the renderer's powers
 
     def _policy_rows(self, mask: torch.Tensor | None, policy) -> torch.Tensor | None:
         """The masked scenarios' indices when ``policy`` may be asked for them alone, else
@@ -243,8 +245,11 @@ class IntervalEngine:
 
     def step_subframe(self, actions, validated: bool = True):
         """One subframe with RRA ``actions`` [B, L]: the twin's outcome
-        (:class:`~vdtn_marl.sim.link.SubframeOutcome`)."""
-        return self.twin.step_subframe(actions, validated=validated)
+        (:class:`~vdtn_marl.sim.link.SubframeOutcome`). The actions stay on the twin as
+        ``last_rra_actions`` (what :func:`~vdtn_marl.envs.render.render_twin` draws)."""
+        outcome = self.twin.step_subframe(actions, validated=validated)
+        self.twin.last_rra_actions = actions
+        return outcome
 
     def subframe_reward(self, outcome):
         """The reward function's (RRA reward [B, L], V2I throughput [B] in Mbps) of a

@@ -97,7 +97,7 @@ class ScenarioView:
 
 
 #: The twin's attributes with a batch dimension that the renderer reads, and its state objects.
-_TWIN_SLICED = ("interval", "last_subchannel", "last_rra_actions")
+_TWIN_SLICED = ("interval", "last_subchannel", "last_rra_actions", "_v2i_rate_sum")
 _TWIN_NESTED = ("platoon", "link_state")
 
 
