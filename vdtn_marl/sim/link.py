@@ -653,13 +653,39 @@ def subframe_step(
     torch from :data:`LINK_MAJOR_MIN_BATCH` scenarios on the work is link-major
     (:func:`_subframe_step_link_major`; the results are ``[B, ...]`` views), below it the
     ``[B, L, M]`` code (:func:`_subframe_step_dense`); on NumPy arrays that code with fewer
-    calls (:func:`_subframe_step_numpy`, bit for bit the same).
+    calls (:func:`_subframe_step_numpy`, bit for bit the same). The three share the SINR
+    equations and the CAM's progress (:func:`sinr_rates_and_progress`); they differ only in
+    the layout, the gathers and the order of the interference sums.
     """
     if isinstance(actions, np.ndarray):
         return _subframe_step_numpy(tables, subframe, actions, state, decode, const)
     if link_major(actions.shape[0]):
         return _subframe_step_link_major(tables, subframe, actions, state, decode, const)
     return _subframe_step_dense(tables, subframe, actions, state, decode, const)
+
+
+def sinr_rates_and_progress(
+    power: Array, own: Array, from_v2i: Array, from_v2v: Array, v2i_signal: Array,
+    bs_interference: Array, remaining_bits: Array, pending: Array, log1p: Callable,
+    noise_mw, bits_per_nat, bps_per_nat, zero,
+) -> tuple[Array, Array, Array, Array]:  # fmt: skip
+    """The SINR equations of docs/model.md §4.4 and the CAM's progress, once for every kernel.
+
+    Each kernel gathers, in its own layout, every V2V link's transmit power ``power`` (0 when
+    silent), own gain ``own``, the power it receives from its sub-channel's V2I user
+    ``from_v2i`` and from the other V2V transmitters there ``from_v2v`` (all ``[B, L]``, or
+    ``[L, B]`` link-major), and every sub-channel's V2I signal ``v2i_signal`` and V2V power at
+    the BS ``bs_interference`` (``[B, M]`` or ``[M, B]``); ``log1p`` and the scalars are the
+    backend's (``zero`` too: the NumPy kernel's are float32 0-d arrays). Returns the V2I rates
+    (bit/s), the V2V bits of this subframe, the bits left and whether the CAM's last bit
+    arrived in this subframe."""
+    v2v_sinr = power * own / (noise_mw + from_v2i + from_v2v)
+    v2v_bits = log1p(v2v_sinr) * bits_per_nat
+    v2i_sinr = v2i_signal / (noise_mw + bs_interference)
+    v2i_rate = log1p(v2i_sinr) * bps_per_nat
+    remaining = remaining_bits - v2v_bits
+    delivered_now = pending & (remaining <= zero)
+    return v2i_rate, v2v_bits, remaining, delivered_now
 
 
 def _subframe_step_dense(tables, subframe, actions, state, decode, const) -> SubframeOutcome:
@@ -679,15 +705,14 @@ def _subframe_step_dense(tables, subframe, actions, state, decode, const) -> Sub
     # received V2V power at each receiver on each sub-channel, then the receiver's own channel
     rx_per_channel = xp.matmul(tables.cross_gain[subframe], power_onehot)  # [B, L, M]
     from_v2v = rx_per_channel.take(flat)
-    v2v_sinr = power * own / (const.noise_mw + from_v2i + from_v2v)
-    v2v_bits = xp.log1p(v2v_sinr) * (const.bandwidth_hz * const.subframe_s / math.log(2.0))
-
     bs_interference = sum_axis(power_onehot * tables.tx_to_bs_gain[subframe], 1)  # [B, M]
-    v2i_sinr = tables.v2i_signal_mw[subframe] / (const.noise_mw + bs_interference)
-    v2i_rate = xp.log1p(v2i_sinr) * (const.bandwidth_hz / math.log(2.0))
-
-    state.remaining_bits = state.remaining_bits - v2v_bits
-    delivered_now = pending & (state.remaining_bits <= 0)
+    v2i_rate, v2v_bits, remaining, delivered_now = sinr_rates_and_progress(
+        power, own, from_v2i, from_v2v, tables.v2i_signal_mw[subframe], bs_interference,
+        state.remaining_bits, pending, xp.log1p, const.noise_mw,
+        const.bandwidth_hz * const.subframe_s / math.log(2.0),
+        const.bandwidth_hz / math.log(2.0), 0,
+    )  # fmt: skip
+    state.remaining_bits = remaining
     state.delay_subframes = xp.where(delivered_now, subframe + 1, state.delay_subframes)
     state.occupancy = sum_axis(tx_onehot, 1)
     return SubframeOutcome(v2i_rate, v2v_bits, power, delivered_now, pending)
@@ -712,13 +737,12 @@ def _subframe_step_numpy(tables, subframe, actions, state, decode, const) -> Sub
     own = tables.own_gain[subframe].take(flat)
     from_v2i = tables.v2i_to_rx_mw[subframe].take(flat)
     from_v2v = np.matmul(tables.cross_gain[subframe], power_onehot).take(flat)
-    v2v_sinr = power * own / (c.noise_mw + from_v2i + from_v2v)
-    v2v_bits = np.log1p(v2v_sinr) * c.v2v_bits_per_nat
     bs_interference = _add_reduce(power_onehot * tables.tx_to_bs_gain[subframe], 1)  # [B, M]
-    v2i_sinr = tables.v2i_signal_mw[subframe] / (c.noise_mw + bs_interference)
-    v2i_rate = np.log1p(v2i_sinr) * c.v2i_bps_per_nat
-    remaining = state.remaining_bits - v2v_bits
-    delivered_now = pending & (remaining <= c.zero)
+    v2i_rate, v2v_bits, remaining, delivered_now = sinr_rates_and_progress(
+        power, own, from_v2i, from_v2v, tables.v2i_signal_mw[subframe], bs_interference,
+        state.remaining_bits, pending, np.log1p, c.noise_mw, c.v2v_bits_per_nat,
+        c.v2i_bps_per_nat, c.zero,
+    )  # fmt: skip
     state.remaining_bits = remaining
     state.delay_subframes = np.where(delivered_now, subframe + 1, state.delay_subframes)
     state.occupancy = _add_reduce(power_onehot > c.zero, 1, dtype=np.float32)
@@ -808,17 +832,13 @@ def link_major_arithmetic(
             cross_gain.permute(2, 0, 1).contiguous(), power_onehot.contiguous()
         )  # [B, L_rx, M]
         from_v2v = rx_per_channel.permute(1, 2, 0).take(flat)
-    v2v_sinr = power * own / (noise_mw + from_v2i + from_v2v)
-    v2v_bits = torch.log1p(v2v_sinr) * bits_per_log1p
-
     # each link's power at the BS on its sub-channel, summed per sub-channel in link order
     to_bs = torch.where(on_channel, (power * tx_to_bs.take(flat))[:, None, :], 0.0)
     bs_interference = _sum_links_link_major(to_bs, in_link_order)  # [M, B]
-    v2i_sinr = v2i_signal / (noise_mw + bs_interference)
-    v2i_rate = torch.log1p(v2i_sinr) * rate_per_log1p
-
-    remaining = remaining_bits.T - v2v_bits
-    delivered_now = pending & (remaining <= 0)
+    v2i_rate, v2v_bits, remaining, delivered_now = sinr_rates_and_progress(
+        power, own, from_v2i, from_v2v, v2i_signal, bs_interference, remaining_bits.T,
+        pending, torch.log1p, noise_mw, bits_per_log1p, rate_per_log1p, 0,
+    )  # fmt: skip
     occupancy = (on_channel & (power > 0)[:, None, :]).sum(0, dtype=torch.float32)
     return v2i_rate, v2v_bits, power, delivered_now, pending, remaining, occupancy
 
