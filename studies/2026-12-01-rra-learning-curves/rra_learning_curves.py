@@ -119,7 +119,8 @@ METHODS = {
 def _ivoi_noise():
     """studies/2026-12-01-rra-positive-control/ivoi_noise.py, whose ``CREDITS`` name the RRA learning problems."""
     spec = importlib.util.spec_from_file_location(
-        "ivoi_noise", Path(__file__).resolve().parents[1] / "2026-12-01-rra-positive-control" / "ivoi_noise.py"
+        "ivoi_noise",
+        Path(__file__).resolve().parents[1] / "2026-12-01-rra-positive-control" / "ivoi_noise.py",
     )
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
