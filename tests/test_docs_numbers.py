@@ -34,6 +34,32 @@ def test_readme_quotes_the_headline_cam_delivery_as_generated():
     assert f"({jocc:.1f} % delivered, DRRA {drra:.1f} %)" in _one_line(README)
 
 
+HEADLINE_2 = json.loads(
+    (ROOT / "benchmarks/results/cells/headline-v2.0/leaderboard.json").read_text()
+)
+
+
+def test_readme_quotes_the_warm_started_jocc_as_generated():
+    """`headline` 2.0's target on platoon4 (jocc_k050_ws against DRRA), its delivery rates and
+    the seeds whose π* fails its reference check, from the report of its committed cells."""
+    target = HEADLINE_2["target"]
+    criteria = {c["metric"]: c for c in target["criteria"] if c["scenario"] == "platoon4"}
+    gap, speed = criteria["gap_error_abs_m"], criteria["speed_error_abs_mps"]
+    v2i = criteria["v2i_throughput_mbps_per_link"]
+    stats = HEADLINE_2["statistics"]["platoon4"]
+    ws, drra = (100 * stats[m]["cam_delivery_rate"]["mean"] for m in (target["method"], "drra"))
+    fails = {r["seed"] for r in HEADLINE_2["reference_failures"] if r["method"] == "jocc_k050_ws"}
+    expected = (
+        f"over {v2i['n']} paired seeds: |gap error| {gap['estimate']:.2f} times DRRA's "
+        f"[{gap['ci_low']:.2f}, {gap['ci_high']:.2f}] ({gap['status']}), |speed error| "
+        f"{speed['estimate']:.2f} times [{speed['ci_low']:.2f}, {speed['ci_high']:.2f}], V2I "
+        f"{v2i['estimate']:+.3f} Mbps per link [{v2i['ci_low']:+.3f}, {v2i['ci_high']:+.3f}] "
+        f"({ws:.1f} % of CAMs delivered, DRRA {drra:.1f} %); π* fails its reference check in "
+        f"{len(fails)} of {v2i['n']} seeds"
+    )
+    assert expected in _one_line(README)
+
+
 def _gap(name: str) -> dict:
     data = json.loads((ROOT / "benchmarks/results" / name).read_text())
     return data["pi_star_causal_mpc_gap_to_oracle_percent"]
