@@ -59,9 +59,16 @@ def test_readme_quotes_the_warm_started_jocc_as_generated():
         f"{speed['estimate']:.2f} times [{speed['ci_low']:.2f}, {speed['ci_high']:.2f}], V2I "
         f"{v2i['estimate']:+.3f} Mbps per link [{v2i['ci_low']:+.3f}, {v2i['ci_high']:+.3f}] "
         f"({ws:.1f} % of CAMs delivered, DRRA {drra:.1f} %); π* fails its reference check in "
-        f"{len(fails)} of {v2i['n']} seeds"
+        f"{len(fails)} of {v2i['n']} seeds; on platoon8 (not complete) it fails in every cell"
     )
     assert expected in _one_line(README)
+    platoon8 = {(r["method"], r["seed"]) for r in HEADLINE_2["runs"] if r["scenario"] == "platoon8"}
+    failed = {
+        (r["method"], r["seed"])
+        for r in HEADLINE_2["reference_failures"]
+        if r["scenario"] == "platoon8"
+    }
+    assert platoon8 and failed == platoon8
 
 
 def _gap(name: str) -> dict:

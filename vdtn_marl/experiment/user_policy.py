@@ -366,9 +366,10 @@ class OutputCheck:
             "m/s² (the platoon's acceleration limits)"
         )
 
-    def problem(self, observation, output, values: bool = True) -> str | None:
-        """What is wrong with ``output`` for ``observation`` (None: nothing); ``values``: also
-        the values (range, finite: a few tensor operations, which wait for an accelerator)."""
+    def problem(self, observation, output) -> str | None:
+        """What is wrong with ``output`` for ``observation`` (None: nothing): its type, shape,
+        dtype and values (range, finite: a few tensor operations, which wait for an
+        accelerator)."""
         import torch
 
         what = "actions" if self.rra else "commands"
@@ -387,8 +388,6 @@ class OutputCheck:
         if output.dtype not in _dtypes(self.rra, self.whole_floats):
             return f"returned {what} of dtype {output.dtype}; {self.allowed}"
         floating = output.is_floating_point()
-        if not values:
-            return None
         if self.rra:
             low_ok, high_ok = 0, self.num_actions - 1
         else:
