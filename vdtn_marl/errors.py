@@ -38,6 +38,10 @@ class RunFileError(ValueError):
     message names the file, the problem and what to do."""
 
 
+class RunDirInUse(RunFileError):
+    """Another live process holds the run directory's lock (:func:`vdtn_marl.io.files.run_lock`)."""
+
+
 class RunWriteError(OSError):
     """A run's file could not be written (a full disk, say); the previous version of the file,
     if any, is intact. The message names the file and the cause."""

@@ -422,6 +422,7 @@ class PPOTrainer:
             "best_return": None,
             "best_iteration": None,
             "best_state": None,
+            "since_best": 0,  # validations since the best one (plateaued)
         }
         if self.algo.validate_every:
             # the weights the stage starts from are a candidate too (iteration start − 1):
@@ -440,7 +441,17 @@ class PPOTrainer:
                     "actor": copy.deepcopy(self.actor.state_dict()),
                     "critic": copy.deepcopy(self.critic.state_dict()),
                 },
+                since_best=0,
             )
+        else:
+            self.stage["since_best"] = self.stage.get("since_best", 0) + 1
+
+    def plateaued(self, patience: int) -> bool:
+        """Whether the stage's last ``patience`` validations in a row did not beat its best
+        (``patience`` 0, or a stage without validation: never)."""
+        if not patience or self.stage is None or not self.algo.validate_every:
+            return False
+        return self.stage.get("since_best", 0) >= patience
 
     def learning_rate(self) -> float:
         """Learning rate of the current iteration's update: ``algo.lr``, or with

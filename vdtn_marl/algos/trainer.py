@@ -47,6 +47,10 @@ class Trainer(Protocol):
     def train_iteration(self) -> Any:
         """Collect one batch and update on it; an :class:`~vdtn_marl.algos.ppo.IterationStats`."""
 
+    def plateaued(self, patience: int) -> bool:
+        """Whether the stage's last ``patience`` validations did not beat its best (the loop
+        then ends the stage early: ``control.pi_star_patience``)."""
+
     def finish_stage(self) -> dict:
         """End the stage (e.g. restore its best validated iterate); what it did, as a dict."""
 

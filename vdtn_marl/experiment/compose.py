@@ -91,6 +91,12 @@ def to_run_config(data: dict, command: str = "jocc") -> Any:
     config.validate_device(run_cfg.device)
     if run_cfg.checkpoint is not None:
         _check_checkpoint(run_cfg, command)
+    elif run_cfg.control.pi_star is not None:  # a checkpoint's π* wins (eval, resume)
+        data["control"]["pi_star"] = checkpoint_file(
+            run_cfg.control.pi_star, required=False, key="control.pi_star"
+        )
+        run_cfg.control.pi_star = data["control"]["pi_star"]
+        check_pi_star(run_cfg)
     elif command == "eval":
         config.check_fixed_policies(run_cfg)
     _build_user_policies(run_cfg)
@@ -148,28 +154,68 @@ def checkpoint_problem(value: Any, exc: Exception) -> str:
     return f"checkpoint={value} {problem}; allowed: a checkpoint written by vdtn-marl"
 
 
-def checkpoint_file(value: Any, required: bool) -> Any:
-    """The file a ``checkpoint`` value names (a run directory stands for its
-    ``checkpoints/last.pt``); ``None`` when none is given and none is ``required``."""
+def checkpoint_file(value: Any, required: bool, key: str = "checkpoint") -> Any:
+    """The file a ``checkpoint`` (or other ``key``) value names (a run directory stands for
+    its ``checkpoints/last.pt``); ``None`` when none is given and none is ``required``."""
     from vdtn_marl.errors import ConfigError
     from vdtn_marl.io.files import CHECKPOINT_DIR
 
     allowed = f"allowed: a run directory (with {CHECKPOINT_DIR}/last.pt) or a checkpoint file"
     if value is None:
         if required:
-            raise ConfigError(f"checkpoint=None: eval needs the policies to evaluate; {allowed}")
+            raise ConfigError(f"{key}=None: eval needs the policies to evaluate; {allowed}")
         return None
     path = Path(str(value))
     if path.is_dir():
         if (path / CHECKPOINT_DIR / "last.pt").is_file():
             return str(path / CHECKPOINT_DIR / "last.pt")
         raise ConfigError(
-            f"checkpoint={value} is a folder without {CHECKPOINT_DIR}/last.pt (no run saved a "
+            f"{key}={value} is a folder without {CHECKPOINT_DIR}/last.pt (no run saved a "
             f"checkpoint there); {allowed}"
         )
     if not path.is_file():
-        raise ConfigError(f"checkpoint={value} does not exist; {allowed}")
+        raise ConfigError(f"{key}={value} does not exist; {allowed}")
     return str(path)
+
+
+def check_pi_star(run_cfg: Any) -> None:
+    """``control.pi_star``: a checkpoint holding a π* trained on this run's scenario, with
+    networks this config builds."""
+    from vdtn_marl.algos.checkpoint import SHAPE_KEYS, CheckpointError, load_checkpoint
+    from vdtn_marl.errors import ConfigError
+    from vdtn_marl.experiment.config import to_dict
+    from vdtn_marl.reporting.tables import flatten
+
+    name = f"control.pi_star={run_cfg.control.pi_star}"
+    mine = to_dict(run_cfg)
+    try:
+        payload = load_checkpoint(run_cfg.control.pi_star)
+    except CheckpointError as exc:
+        raise ConfigError(
+            f"{name} cannot be used ({exc}); allowed: a vdtn-marl checkpoint"
+        ) from exc
+    saved, given = flatten(payload.get("config", {})), flatten(mine)
+    for key in SHAPE_KEYS:  # π* sees perfect observations: control.augmentation is π̃'s
+        if not key.startswith("control.") and saved.get(key) != given.get(key):
+            raise ConfigError(
+                f"{key}={given.get(key)!r} does not fit {name}, whose π* was built with "
+                f"{key}={saved.get(key)!r}; allowed: {key}={saved.get(key)!r}"
+            )
+    state = payload.get("trainers", {}).get("pi_star")
+    position = payload.get("position", {})
+    if state is None or not (state.get("iteration") or position.get("warm_start")):
+        raise ConfigError(
+            f"{name} holds no trained π* (no PPO iteration, no warm start); allowed: the "
+            "checkpoint of a run that trained π* (vdtn-marl train task=control)"
+        )
+    theirs = flatten({"scenario": payload.get("config", {}).get("scenario", {})})
+    ours = flatten({"scenario": mine["scenario"]})
+    for key in sorted(set(theirs) | set(ours)):
+        if theirs.get(key) != ours.get(key):
+            raise ConfigError(
+                f"{key}={ours.get(key)!r} but {name} trained π* with {key}={theirs.get(key)!r}; "
+                "allowed: a π* trained on this run's scenario"
+            )
 
 
 def _one_line(text: str) -> str:

@@ -114,6 +114,13 @@ class ControlConfig:
     # fixed validation scenarios and the best is kept, the stage's start a candidate (so π*
     # ends no worse than its start there); 0: π* keeps its last iterate
     pi_star_validate_every: int = 10
+    # π*'s stage ends early once this many validations in a row did not beat its best (its
+    # plateau; needs pi_star_validate_every); 0: it runs all experiment.control_iterations
+    pi_star_patience: int = 0
+    # a π* trained elsewhere (a run directory or checkpoint of a run that trained one, e.g.
+    # `vdtn-marl train task=control`): it is loaded and not trained here, so methods can share
+    # one π* per scenario and seed (`vdtn-marl bench` with benchmark.pi_star); None: train it
+    pi_star: str | None = None
     # control=oracle|causal_mpc: Adam steps per control interval of the MPC's solver; None:
     # the controller's default (oracle 400, causal_mpc 200; see vdtn_marl.policies.mpc_oracle)
     mpc_iterations: int | None = None
@@ -302,6 +309,13 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("control.warm_start", c.warm_start, WARM_STARTS)
     _positive_int("control.pi_star_critic_warmup", c.pi_star_critic_warmup, low=0)
     _positive_int("control.pi_star_validate_every", c.pi_star_validate_every, low=0)
+    _positive_int("control.pi_star_patience", c.pi_star_patience, low=0)
+    if c.pi_star_patience and not c.pi_star_validate_every:
+        raise ConfigError(
+            f"control.pi_star_patience={c.pi_star_patience} counts π*'s validations, but "
+            "control.pi_star_validate_every=0 scores none; allowed: "
+            "control.pi_star_validate_every >= 1, or control.pi_star_patience=0"
+        )
     if c.mpc_iterations is not None:
         _positive_int("control.mpc_iterations", c.mpc_iterations, high=100_000)
         if c.name not in MPC_CONTROLS:
@@ -581,6 +595,10 @@ class BenchmarkConfig:
     bootstrap_resamples: int = 10_000  # resamples of the bootstrap CIs (bca/percentile, IQM)
     confidence: float = 0.95
     target: BenchmarkTargetConfig | None = None  # the headline claim the report checks
+    # the π* the cells share, one per scenario and seed: the overrides of its `train
+    # task=control` run after `experiment` and `overrides` (e.g. its budget and plateau);
+    # null: every cell trains its own π* (vdtn_marl/leaderboard/pi_star.py)
+    pi_star: list[str] | None = None
 
 
 @dataclass
@@ -678,8 +696,11 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
                 f"submissions.{name} has the name of a method of benchmark {b.name!r}; "
                 f"allowed: a name other than {', '.join(b.methods)}"
             )
+    if b.pi_star is not None:
+        _validate_pi_star(cfg)
     for where, overrides in [
         ("benchmark.overrides", b.overrides),
+        *((("benchmark.pi_star", b.pi_star),) if b.pi_star is not None else ()),
         *((f"benchmark.methods.{m}", o) for m, o in b.methods.items()),
         *((f"benchmark.budgets.{m}", o) for m, o in b.budgets.items()),
         *((f"submissions.{m}", o) for m, o in cfg.submissions.items()),
@@ -718,6 +739,32 @@ def validate_benchmark(cfg: BenchConfig) -> BenchConfig:
         raise ConfigError("out_dir='' must name the directory of the benchmark's runs")
     _validate_cell_patterns(cfg)
     return cfg
+
+
+#: The directory name of the shared π* runs (benchmark.pi_star), beside the methods'.
+PI_STAR_NAME = "pi_star"
+
+
+def _validate_pi_star(cfg: BenchConfig) -> None:
+    """``benchmark.pi_star``: no method is named like its runs, and none sets π* itself."""
+    b = cfg.benchmark
+    if isinstance(b.pi_star, str) or not isinstance(b.pi_star, Sequence):
+        raise ConfigError(f"benchmark.pi_star={b.pi_star!r} must be a list of overrides or null")
+    methods = {**b.methods, **cfg.submissions}
+    if PI_STAR_NAME in methods:
+        raise ConfigError(
+            f"benchmark.methods.{PI_STAR_NAME} names the shared π* runs' directory "
+            f"(benchmark.pi_star); allowed: another method name"
+        )
+    for method, overrides in methods.items():
+        for item in overrides:
+            key = str(item).partition("=")[0].lstrip("+~")
+            if key.startswith("control.pi_star") or key.startswith("control.warm_start"):
+                raise ConfigError(
+                    f"benchmark.methods.{method} sets {item!r}, but benchmark.pi_star shares "
+                    "one π* per scenario and seed across the methods; allowed: set π*'s "
+                    "options in benchmark.pi_star"
+                )
 
 
 def selected_cells(patterns: Sequence[str], names: Sequence[str]) -> list[str]:

@@ -257,6 +257,10 @@ def run_summary(
         # with algo.validate_every: the trainer iteration whose weights each stage kept
         "selected_iterations": dict(position.get("selected_iterations", {})),
         "warm_start": position.get("warm_start"),
+        # control.pi_star: the run π* was loaded from (not trained here), and what it holds
+        "pi_star_source": position.get("shared_pi_star"),
+        # control.pi_star_patience: the stages that ended at their plateau, where
+        "plateaus": position.get("plateaus"),
         # control.pi_star_critic_warmup: π*'s critic fitted before its first update
         "critic_warmup": position.get("critic_warmup"),
         # rra.warm_start: the RRA agents' imitation of a baseline

@@ -46,7 +46,7 @@ from typing import Any
 
 import torch
 
-from vdtn_marl.algos.checkpoint import rng_state, set_rng_state
+from vdtn_marl.algos.checkpoint import load_checkpoint, rng_state, set_rng_state
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.imitation import distill_rra_teacher, distill_teacher, distillation_ticks
 from vdtn_marl.algos.networks import AUGMENTATION_FEATURES
@@ -450,8 +450,8 @@ class JointOptimisation:
     # ------------------------------------------------------------------ stages
     def _stage_budget(self, stage: str) -> tuple[Trainer | None, int]:
         e = self.cfg.experiment
-        if stage == "control_perfect":
-            return self.pi_star, e.control_iterations
+        if stage == "control_perfect":  # control.pi_star: loaded, not trained here
+            return (None, 0) if self.cfg.control.pi_star else (self.pi_star, e.control_iterations)
         if stage == "control_impaired":
             return (self.pi_tilde, e.control_iterations) if self.control_learned else (None, 0)
         if stage == "rra":
@@ -486,8 +486,9 @@ class JointOptimisation:
         end = self.position["stage_start"] + budget
         every = self.cfg.experiment.checkpoint_every
         what = f"{STAGE_POLICIES[stage]} for {end - trainer.iteration} PPO iterations"
+        patience = self.cfg.control.pi_star_patience if stage == "control_perfect" else 0
         with logged_stage(stage, what, self.position["iteration"]):
-            while trainer.iteration < end:
+            while trainer.iteration < end and not trainer.plateaued(patience):
                 stats = trainer.train_iteration()
                 row = {"jocc_iteration": self.position["iteration"], "stage": stage}
                 row.update(stats.__dict__)
@@ -499,9 +500,48 @@ class JointOptimisation:
                     check_interrupt()
                 if every and trainer.iteration < end and trainer.iteration % every == 0:
                     self.save()
+        if trainer.iteration < end:  # control.pi_star_patience: π* reached its plateau
+            self._record_plateau(stage, trainer, end, patience)
+            bar.update(end - trainer.iteration)
         selected = trainer.finish_stage()["best_iteration"]
         if selected is not None:  # algo.validate_every: the stage kept this iteration's weights
             self.position.setdefault("selected_iterations", {})[stage] = selected
+
+    def _record_plateau(self, stage: str, trainer: Trainer, end: int, patience: int) -> None:
+        """The stage ended ``end − iteration`` PPO iterations early: its last ``patience``
+        validations did not beat its best."""
+        record = {"stopped_at": trainer.iteration, "budget_end": end, "patience": patience}
+        self.position.setdefault("plateaus", {})[stage] = record
+        _log.info(
+            "%s reached its plateau at PPO iteration %d (%d validations without a gain); "
+            "%d of the stage's iterations left unused",
+            STAGE_POLICIES[stage], trainer.iteration, patience, end - trainer.iteration,
+        )  # fmt: skip
+
+    def _load_shared_pi_star(self) -> None:
+        """``control.pi_star``: π* (actor, critic, observation scaling) is that of another
+        run's checkpoint, and is not trained here. Its start's score on this run's
+        evaluation scenarios comes with it where that run scored it on the same ones."""
+        path = self.cfg.control.pi_star
+        saved = load_checkpoint(path)  # its networks fit (compose.check_pi_star)
+        self.pi_star.load_state_dict(saved["trainers"]["pi_star"])
+        position = saved.get("position", {})
+        memo = self.reference_memo()
+        theirs = position.get("reference", {})
+        if theirs.get("scenarios") == memo["scenarios"] and "start" in theirs:
+            memo.setdefault("start", list(theirs["start"]))
+        self.position["shared_pi_star"] = {
+            "checkpoint": str(path),
+            "sha256": warm_start.file_digest(path),
+            "seed": saved.get("config", {}).get("seed"),
+            "ppo_iterations": self.pi_star.iteration,
+            "selected_iteration": position.get("selected_iterations", {}).get("control_perfect"),
+            "plateau": position.get("plateaus", {}).get("control_perfect"),
+            "warm_start": position.get("warm_start"),
+        }
+        _log.info(
+            "π* loaded from %s (%d PPO iterations), not trained here", path, self.pi_star.iteration
+        )
 
     def _fit_pi_star_critic(self) -> None:
         """``control.pi_star_critic_warmup``: π*'s critic alone learns its start policy's
@@ -786,6 +826,8 @@ class JointOptimisation:
                 return read_json(ended)
         if resumed:
             self._apply_term_scales()
+        elif cfg.control.pi_star and not cfg.checkpoint:
+            self._load_shared_pi_star()
         began = time.perf_counter()
         done_steps = 0
         if resumed:

@@ -21,7 +21,7 @@ from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.errors import RunFileError, RunWriteError
+from vdtn_marl.errors import RunDirInUse, RunFileError, RunWriteError
 
 METRICS_FILE = "metrics.csv"
 EVALUATION_FILE = "evaluation.csv"
@@ -142,10 +142,10 @@ def lock_holder(run_dir: str | Path) -> str | None:
 def run_lock(run_dir: str | Path) -> Iterator[None]:
     """Hold ``run_dir``'s lock (an exclusive ``flock`` on ``run_dir/.lock``, released when the
     process ends however it ends): a second process that tries to run in the same folder gets
-    :class:`RunFileError` naming the folder and the holder's pid. The lock file is removed
-    when the block ends (a process killed before leaves one that locks nothing), and the
-    folder too where the block created it and it is still empty. Re-entrant in one process;
-    a no-op where ``fcntl`` is missing (Windows)."""
+    :class:`~vdtn_marl.errors.RunDirInUse` (a :class:`RunFileError`) naming the folder and the
+    holder's pid. The lock file is removed when the block ends (a process killed before leaves
+    one that locks nothing), and the folder too where the block created it and it is still
+    empty. Re-entrant in one process; a no-op where ``fcntl`` is missing (Windows)."""
     try:
         import fcntl
     except ImportError:  # pragma: no cover - Windows
@@ -171,7 +171,7 @@ def run_lock(run_dir: str | Path) -> Iterator[None]:
             handle.seek(0)
             holder = handle.read().strip() or "unknown"
             handle.close()
-            raise RunFileError(
+            raise RunDirInUse(
                 f"{key} is in use by another run (pid {holder}): two launchers must not write "
                 "into one run directory; wait for it to end or pick another directory"
             ) from None

@@ -23,7 +23,10 @@ from vdtn_marl.io.files import SUMMARY_FILE, read_json
 
 MANIFEST_FILE = "benchmark.json"
 #: Config keys a resumed cell may change (the rest must match the cell's own run).
-FREE_KEYS = ("resume", "progress", "device", "threads", "checkpoint", "warm_start_cache")
+FREE_KEYS = (
+    "resume", "progress", "device", "threads", "checkpoint", "warm_start_cache",
+    "control.pi_star",  # where the shared π* lies (its SHA-256 is in the summary)
+)  # fmt: skip
 #: where ``share_warm_starts`` keeps the warm starts of π* the cells share, in ``out_dir``
 WARM_START_DIR = "warm_starts"
 
@@ -144,6 +147,7 @@ def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:
 #: Fields of a benchmark that decide its runs: an out_dir holds runs of one set of them.
 RUN_FIELDS = (
     "experiment", "overrides", "scenarios", "methods", "budgets", "seeds", "extra_seeds",
+    "pi_star",
 )  # fmt: skip
 
 
@@ -220,7 +224,8 @@ def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
         return None
     old, new = flatten(summary.get("config") or {}), flatten(dict(data))
     for key in sorted(set(old) & set(new)):
-        if key.split(".")[0] not in FREE_KEYS and old[key] != new[key]:
+        free = key in FREE_KEYS or key.split(".")[0] in FREE_KEYS
+        if not free and old[key] != new[key]:
             raise LeaderboardError(
                 f"{path} was run with {key}={old[key]!r}, the benchmark now gives "
                 f"{key}={new[key]!r}; bump benchmark.version (a new out_dir) or remove "

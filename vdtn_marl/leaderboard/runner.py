@@ -6,9 +6,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.experiment.compose import hydra_compose
+from vdtn_marl.experiment.compose import check_pi_star, hydra_compose
 from vdtn_marl.experiment.config import BenchConfig, selected_cells
 from vdtn_marl.io.files import CONFIG_FILE, atomic_write_json, atomic_write_text, run_lock
+from vdtn_marl.leaderboard import pi_star
 from vdtn_marl.leaderboard.grid import (
     MANIFEST_FILE,
     WARM_START_DIR,
@@ -68,6 +69,11 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
         title = f"bench {cfg.benchmark.name} v{cfg.benchmark.version}"
         if cfg.num_shards > 1:
             title += f" shard {cfg.shard}/{cfg.num_shards}"
+        shared = pi_star.pi_star_runs(cfg.benchmark, cells)  # benchmark.pi_star
+        pi_star_composed = {
+            run: pi_star.compose_pi_star(run, cfg.device) for run in shared.values()
+        }
+        needed = list(dict.fromkeys(shared[(c.scenario, c.seed)] for c in mine if shared))
         with progress(len(mine), title, cfg.progress) as bar:
             for cell in mine:
                 data, run_cfg = composed[cell]
@@ -83,6 +89,11 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
                 if cfg.share_warm_starts:  # the results do not depend on it (warm_start.py)
                     run_cfg.warm_start_cache = str(out_dir / WARM_START_DIR)
                 try:
+                    if shared:
+                        run = shared[(cell.scenario, cell.seed)]
+                        path = pi_star.ensure(run, pi_star_composed, out_dir, needed)
+                        data["control"]["pi_star"] = run_cfg.control.pi_star = str(path)
+                        check_pi_star(run_cfg)
                     run_cell(cell, data, run_cfg, out_dir)
                 except Exception as exc:  # one failing cell does not stop the grid
                     failed.append((cell, f"{type(exc).__name__}: {exc}"))

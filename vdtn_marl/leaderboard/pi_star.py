@@ -1,0 +1,161 @@
+"""The π* a benchmark's cells share: one per scenario and seed (``benchmark.pi_star``).
+
+π* is the controller on perfect observations, the reference of IVoI and EVoI. It does not
+depend on the RRA policy or on who acts, so every method of a scenario and seed can be
+measured against one π*, trained once (to its plateau: ``control.pi_star_patience``) instead
+of once per cell with the cell's budget. With ``benchmark.pi_star`` a list of overrides, the
+grid first gets, per scenario and seed, a ``vdtn-marl train task=control`` run in
+``<out_dir>/<scenario>/pi_star/seed<k>/`` composed as ``scenario=S experiment=E <overrides>
+<benchmark.pi_star> seed=K``; every cell of that scenario and seed then loads its π* from the
+run's checkpoint (``control.pi_star``) and trains none of its own. A cell's summary names the
+π* it used and its SHA-256 (``pi_star_source``).
+
+Sharded jobs share the π* runs: a job trains the π* a cell needs unless another job is
+training it (the run directory's lock), in which case it trains another π* its cells need
+meanwhile, or waits for it.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from vdtn_marl.errors import LeaderboardError, RunDirInUse
+from vdtn_marl.experiment.compose import compose_config, job_config, to_run_config, translate
+from vdtn_marl.experiment.config import PI_STAR_NAME, BenchmarkConfig
+from vdtn_marl.io.files import CONFIG_FILE, SUMMARY_FILE, atomic_write_text, read_json, run_lock
+
+_log = logging.getLogger(__name__)
+#: seconds between two looks at a π* another job trains
+POLL_SECONDS = 10.0
+
+
+@dataclass(frozen=True)
+class PiStarRun:
+    """The shared π* of one scenario and seed."""
+
+    scenario: str
+    seed: int
+    overrides: tuple[str, ...]
+
+    @property
+    def name(self) -> str:
+        return f"{self.scenario}/{PI_STAR_NAME}/seed{self.seed}"
+
+    def directory(self, out_dir: str | Path) -> Path:
+        return Path(out_dir) / self.scenario / PI_STAR_NAME / f"seed{self.seed}"
+
+    def checkpoint(self, out_dir: str | Path) -> Path:
+        from vdtn_marl.experiment.checkpoint import checkpoint_path
+
+        return checkpoint_path(self.directory(out_dir))
+
+
+def pi_star_runs(
+    benchmark: BenchmarkConfig, cells: Iterable[Any]
+) -> dict[tuple[str, int], PiStarRun]:
+    """The π* run of every (scenario, seed) of ``cells``, in the cells' order (empty where
+    ``benchmark.pi_star`` is null)."""
+    if benchmark.pi_star is None:
+        return {}
+    runs: dict[tuple[str, int], PiStarRun] = {}
+    for cell in cells:
+        key = (cell.scenario, cell.seed)
+        if key not in runs:
+            overrides = (
+                f"scenario={cell.scenario}",
+                f"experiment={benchmark.experiment}",
+                *map(str, benchmark.overrides),
+                *map(str, benchmark.pi_star),
+                "task=control",
+                f"seed={cell.seed}",
+            )
+            runs[key] = PiStarRun(cell.scenario, cell.seed, overrides)
+    return runs
+
+
+def compose_pi_star(run: PiStarRun, device: str) -> tuple[dict, Any]:
+    """(composed config as plain data, validated RunConfig) of a π* run."""
+    overrides = [*run.overrides, f"device={device}", "resume=true", "progress=false"]
+    try:
+        data = job_config(compose_config("config", overrides))
+        return data, to_run_config(data, "train")
+    except Exception as exc:
+        raise LeaderboardError(f"{run.name}: {translate(exc, 'config', overrides)}") from exc
+
+
+def finished(run: PiStarRun, data: dict, out_dir: str | Path) -> bool:
+    """Whether the π* run ended (its summary is written) with the config ``data``; a finished
+    run of another config raises :class:`LeaderboardError`."""
+    from vdtn_marl.reporting.tables import flatten
+
+    path = run.directory(out_dir) / SUMMARY_FILE
+    if not path.is_file() or not run.checkpoint(out_dir).is_file():
+        return False
+    try:
+        summary = read_json(path)
+    except (OSError, ValueError):
+        return False
+    if summary.get("task") != "control":
+        return False
+    old, new = flatten(summary.get("config") or {}), flatten(dict(data))
+    for key in sorted(set(old) & set(new)):
+        if (
+            key.split(".")[0] not in ("resume", "progress", "device", "threads")
+            and old[key] != new[key]
+        ):
+            raise LeaderboardError(
+                f"{path} was run with {key}={old[key]!r}, the benchmark now gives "
+                f"{key}={new[key]!r}; bump benchmark.version (a new out_dir) or remove "
+                f"{run.directory(out_dir)} to train π* again"
+            )
+    return True
+
+
+def train(run: PiStarRun, data: dict, run_cfg: Any, out_dir: str | Path) -> None:
+    """Train (or continue) the π* run in its directory; :class:`RunDirInUse` where another
+    job holds it."""
+    from omegaconf import OmegaConf
+
+    from vdtn_marl.experiment import api
+
+    run_dir = run.directory(out_dir)
+    with run_lock(run_dir):
+        if finished(run, data, out_dir):  # another job ended it while we looked
+            return
+        atomic_write_text(run_dir / CONFIG_FILE, OmegaConf.to_yaml(OmegaConf.create(data)))
+        _log.info("training the shared π* %s", run.name)
+        api.train(run_cfg, run_dir)
+
+
+def ensure(
+    run: PiStarRun,
+    composed: dict[PiStarRun, tuple[dict, Any]],
+    out_dir: str | Path,
+    meanwhile: Iterable[PiStarRun] = (),
+    sleep: Callable[[float], None] = time.sleep,
+) -> Path:
+    """The checkpoint of ``run``'s π*, trained here unless it is done; while another job trains
+    it, train one of ``meanwhile`` (other π* this job will need) that no one trains, or wait."""
+    while not finished(run, composed[run][0], out_dir):
+        try:
+            train(run, *composed[run], out_dir)
+            continue
+        except RunDirInUse:
+            pass
+        for other in meanwhile:
+            if other == run or finished(other, composed[other][0], out_dir):
+                continue
+            try:
+                train(other, *composed[other], out_dir)
+                break
+            except RunDirInUse:
+                continue
+        else:
+            _log.info("waiting for the shared π* %s, which another job trains", run.name)
+            sleep(POLL_SECONDS)
+    return run.checkpoint(out_dir)
