@@ -122,10 +122,17 @@ def test_benchmark_cells_share_one_pi_star_per_scenario_and_seed(tmp_path):
         assert "control_perfect" not in _stages(cell.directory(tmp_path))
         costs.add(summary["optimal_control_cost"])
     assert len(costs) == 1  # one π*, one set of held-out scenarios
-    # a rerun finds every cell and π* done, and trains nothing
+    # a rerun finds every cell and π* done, and trains nothing; its report lists the π*
     before = checkpoint.stat().st_mtime_ns
-    again = leaderboard.run_benchmark(_bench(tmp_path), command="test")
+    cfg = _bench(tmp_path)
+    cfg.report = True
+    again = leaderboard.run_benchmark(cfg, command="test")
     assert not again.ran and checkpoint.stat().st_mtime_ns == before
+    report = read_json(again.report["json"])
+    [row] = report["shared_pi_star"]
+    assert (row["scenario"], row["seed"], row["ppo_iterations"]) == ("platoon4", 0, 2)
+    assert row["control_cost"] == read_json(shared / SUMMARY_FILE)["control_cost"]
+    assert "## The shared π*" in again.report["markdown"].read_text(encoding="utf-8")
 
 
 def test_benchmark_pi_star_refuses_methods_that_set_pi_star(tmp_path):

@@ -159,3 +159,78 @@ def ensure(
             _log.info("waiting for the shared π* %s, which another job trains", run.name)
             sleep(POLL_SECONDS)
     return run.checkpoint(out_dir)
+
+
+#: What the report shows of each shared π* run (its summary's keys).
+REPORT_KEYS = (
+    "control_cost", "pi_star_minus_start", "pi_star_minus_causal_mpc", "pi_star_minus_cacc",
+)  # fmt: skip
+
+
+def report_rows(
+    benchmark: BenchmarkConfig, cells: Iterable[Any], out_dir: str | Path
+) -> list[dict]:
+    """One row per finished shared π* run of ``cells`` (none where ``benchmark.pi_star`` is
+    null): PPO iterations, the iteration kept, where it reached its plateau, its control cost
+    on perfect observations and its reference check against its start, the causal MPC and
+    the CACC (mean and interval of J* − J_c over the held-out scenarios)."""
+    rows = []
+    for (scenario, seed), run in pi_star_runs(benchmark, cells).items():
+        path = run.directory(out_dir) / SUMMARY_FILE
+        if not path.is_file():
+            continue
+        s = read_json(path)
+        plateau = (s.get("plateaus") or {}).get("control_perfect")
+        row = {
+            "scenario": scenario,
+            "seed": seed,
+            "ppo_iterations": (s.get("trainer_iterations") or {}).get("pi_star"),
+            "selected_iteration": (s.get("selected_iterations") or {}).get("control_perfect"),
+            "plateau_at": plateau["stopped_at"] if plateau else None,
+            "reference_ok": s.get("reference_ok"),
+            "reference_problems": s.get("reference_problems") or "",
+        }
+        for key in REPORT_KEYS:
+            row[key] = s.get(key)
+            if key.startswith("pi_star_minus_"):
+                row[f"{key}_ci_low"], row[f"{key}_ci_high"] = (
+                    s.get(f"{key}_ci_low"),
+                    s.get(f"{key}_ci_high"),
+                )
+        rows.append(row)
+    return rows
+
+
+def report_markdown(rows: list[dict]) -> list[str]:
+    """The report's section on the shared π* runs (empty without any)."""
+    if not rows:
+        return []
+
+    def diff(row: dict, key: str) -> str:
+        mean, low, high = (row.get(f"{key}{s}") for s in ("", "_ci_low", "_ci_high"))
+        if mean is None:
+            return "–"
+        return f"{mean:+.4f} [{low:+.4f}, {high:+.4f}]" if low is not None else f"{mean:+.4f}"
+
+    lines = [
+        "## The shared π*",
+        "",
+        "One π* per scenario and seed (`benchmark.pi_star`), trained by `vdtn-marl train "
+        "task=control` and loaded by every cell of that scenario and seed. J* − J_c: π*'s "
+        "discounted return minus the comparator's on perfect observations, per follower, over "
+        "the held-out scenarios (mean [95 % t interval]; above 0: π* is better).",
+        "",
+        "| scenario | seed | PPO iterations | kept | plateau at | control cost | "
+        "J* − J start | J* − J causal MPC | J* − J CACC | check |",
+        "|---|--:|--:|--:|--:|--:|--:|--:|--:|---|",
+    ]
+    for r in rows:
+        cost = "–" if r["control_cost"] is None else f"{r['control_cost']:.4f}"
+        check = "passed" if r["reference_ok"] else f"FAILED: {r['reference_problems']}"
+        lines.append(
+            f"| {r['scenario']} | {r['seed']} | {r['ppo_iterations']} | {r['selected_iteration']} "
+            f"| {r['plateau_at'] if r['plateau_at'] is not None else '–'} | {cost} | "
+            f"{diff(r, 'pi_star_minus_start')} | {diff(r, 'pi_star_minus_causal_mpc')} | "
+            f"{diff(r, 'pi_star_minus_cacc')} | {check} |"
+        )
+    return [*lines, ""]

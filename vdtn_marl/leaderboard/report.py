@@ -22,6 +22,7 @@ from vdtn_marl.experiment.config import BenchConfig
 from vdtn_marl.experiment.metrics import AOI_KEYS, METRICS
 from vdtn_marl.experiment.reference import REFERENCE_WARNING, row_problems
 from vdtn_marl.io.files import atomic_write_json, atomic_write_text, read_json
+from vdtn_marl.leaderboard import pi_star
 from vdtn_marl.leaderboard.grid import Cell, compose_cell, plan, with_submissions
 from vdtn_marl.leaderboard.plots import write_plots
 from vdtn_marl.leaderboard.stats import (
@@ -235,6 +236,7 @@ def _markdown(
     target: Mapping[str, Any] | None = None,
     marl_eval_left_out: int = 0,
     videos: Sequence[LeaderboardVideo] = (),
+    shared_pi_star: Sequence[Mapping[str, Any]] = (),
 ) -> str:
     b = cfg.benchmark
     table_metrics = [m for m in METRICS if m.table]
@@ -279,6 +281,8 @@ def _markdown(
     lines += _reference_lines(reference_failures(rows), len(rows))
     if target is not None:
         lines += ["", *target_markdown(target)]
+    if shared_pi_star:
+        lines += ["", *pi_star.report_markdown(shared_pi_star)]
     lines += [
         "",
         "## Methods",
@@ -454,6 +458,7 @@ def write_report(
     marl_eval, dropped = marl_eval_data(rows, b)
     marl_eval_left_out = sum(is_extra_run(r, b) for r in rows)
     target = check_target(rows, b)
+    shared_pi_star = pi_star.report_rows(b, cells, cfg.out_dir)  # benchmark.pi_star
     ci = describe_interval(b.interval, b.confidence, b.bootstrap_resamples)
     fallbacks = _bca_fallbacks(stats, paired)
     header = {
@@ -493,6 +498,7 @@ def write_report(
             "paired_differences": paired,
             **({"target": target} if target is not None else {}),
             "reference_failures": reference_failures(rows),
+            **({"shared_pi_star": shared_pi_star} if shared_pi_star else {}),
             "runs": rows,
         },
     )
@@ -532,6 +538,7 @@ def write_report(
             target,
             marl_eval_left_out,
             videos,
+            shared_pi_star,
         ),
     )
     for scenario, kinds in plots.items():
