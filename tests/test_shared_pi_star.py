@@ -110,6 +110,11 @@ def _bench(out_dir: Path, **benchmark) -> config.BenchConfig:
 
 
 def test_benchmark_cells_share_one_pi_star_per_scenario_and_seed(tmp_path):
+    first = _bench(tmp_path)
+    first.cells = ["*/pi_star/*"]  # the shared π* alone, before any cell
+    alone = leaderboard.run_benchmark(first, command="test")
+    assert not alone.ran and len(alone.pending) == 2
+    assert (tmp_path / "platoon4" / "pi_star" / "seed0" / SUMMARY_FILE).is_file()
     result = leaderboard.run_benchmark(_bench(tmp_path), command="test")
     assert len(result.ran) == 2 and not result.failed
     shared = tmp_path / "platoon4" / "pi_star" / "seed0"

@@ -611,7 +611,9 @@ class BenchConfig:
     ``out_dir``). ``shard``/``num_shards`` split the grid between the jobs of a Hydra sweep
     (``-m bench shard=0,1 num_shards=2 hydra/launcher=joblib``). ``cells`` (glob patterns over
     ``<scenario>/<method>/seed<k>``, e.g. ``[platoon4/greedy/*]``; empty: all) runs only the
-    matching cells, shards splitting those; the report still covers every complete cell.
+    matching cells, shards splitting those; the report still covers every complete cell. With
+    ``benchmark.pi_star`` the patterns may name the shared π* runs too
+    (``<scenario>/pi_star/seed<k>``; ``[*/pi_star/*]`` trains only those).
     ``run=false`` runs no cell and only writes the report of the complete ones.
     ``share_warm_starts`` lets the cells that would compute the same warm start of π* share it
     through ``<out_dir>/warm_starts`` (``warm_start_cache``; the results do not change).
@@ -809,6 +811,8 @@ def _validate_cell_patterns(cfg: BenchConfig) -> None:
         for method in b.methods
         for seed in benchmark_seeds(b, scenario, method)
     ]
+    if b.pi_star is not None:  # the shared π* runs are selectable too
+        names += sorted({f"{n.split('/')[0]}/{PI_STAR_NAME}/{n.split('/')[2]}" for n in names})
     for pattern in patterns:
         if not isinstance(pattern, str) or not selected_cells([pattern], names):
             raise ConfigError(

@@ -74,6 +74,10 @@ def run_benchmark(cfg: BenchConfig, command: str = "") -> BenchmarkResult:
             run: pi_star.compose_pi_star(run, cfg.device) for run in shared.values()
         }
         needed = list(dict.fromkeys(shared[(c.scenario, c.seed)] for c in mine if shared))
+        # `cells` patterns may name π* runs themselves (e.g. [*/pi_star/*]): trained first
+        chosen = [r for r in shared.values() if cfg.cells and selected_cells(cfg.cells, [r.name])]
+        for run in (share := chosen[cfg.shard :: cfg.num_shards]) if cfg.run else ():
+            pi_star.ensure(run, pi_star_composed, out_dir, share)
         with progress(len(mine), title, cfg.progress) as bar:
             for cell in mine:
                 data, run_cfg = composed[cell]
