@@ -22,6 +22,7 @@ from vdtn_marl.data.traces import TraceSource
 from vdtn_marl.io.interrupts import check_interrupt
 from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.sim.aoi import interval_age_ms
+from vdtn_marl.sim.link import cam_delivered
 from vdtn_marl.sim.params import TwinParams
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import IVoIEstimator
@@ -247,7 +248,7 @@ def evaluate_system(
         if radio:
             v2i_sum += (alive[:, None].double() * record.v2i_rate_bps.double()).mean(-1).sum()
             delay = record.cam_delay_subframes
-            in_time = delay <= t  # [B, L]; link i carries follower i's CAM
+            in_time = cam_delivered(delay, t)  # [B, L]; link i carries follower i's CAM
             delivered = in_time & alive[:, None]
             cams_sent += alive.double().sum() * delay.shape[-1]
             cams_delivered += delivered.double().sum()

@@ -21,6 +21,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.patches import Patch, Rectangle
 
+from vdtn_marl.sim.link import cam_delivered
+
 FIG_SIZE_IN = (8.0, 4.5)
 DPI = 100
 
@@ -193,7 +195,7 @@ def _link_states(twin) -> tuple[np.ndarray, list[str]]:
     fraction = np.clip(1.0 - remaining / cam_bits, 0.0, 1.0)
     states = []
     for r, d in zip(remaining, delay, strict=True):
-        if r <= 0 or d <= t:
+        if r <= 0 or cam_delivered(d, t):
             states.append("delivered")
         elif twin.subframe >= t:
             states.append("lost")

@@ -91,6 +91,7 @@ from vdtn_marl.policies.rra import RandomRRAPolicy
 from vdtn_marl.scenarios import DEFAULT_SCENARIO, Scenario, get_scenario
 from vdtn_marl.sim.aoi import interval_age_ms
 from vdtn_marl.sim.completion import make_completion
+from vdtn_marl.sim.link import cam_delivered
 from vdtn_marl.sim.snapshot import export_state, import_state
 from vdtn_marl.sim.twin import DigitalTwin, resolve_device
 from vdtn_marl.voi import IVoIEstimator
@@ -518,7 +519,7 @@ class VDTNTorchRLEnv(EngineBacked, EnvBase):
             twin, f = self.twin, self.num_followers
             t = twin.subframes_per_interval
             delay = record.cam_delay_subframes  # link i carries follower i's CAM
-            info["cam_delivered"] = delay <= t
+            info["cam_delivered"] = cam_delivered(delay, t)
             info["aoi_ms"] = interval_age_ms(held_age, delay, t, twin.subframe_ms)[0]
             g = record.v2i_rate_bps.sum(-1) * 1e-6
             info["v2i_throughput_mbps"] = g[:, None].expand(self.num_scenarios, f)

@@ -123,6 +123,13 @@ class LinkState:
         )
 
 
+def cam_delivered(delay_subframes: Array, subframes_per_interval: int) -> Array:
+    """Whether each link's CAM arrived within its interval: its delivery subframe (1..T, T + 1
+    while not delivered; :attr:`LinkState.delay_subframes`) is at most T, so a CAM whose last
+    bit arrives in the deadline subframe T counts as delivered."""
+    return delay_subframes <= subframes_per_interval
+
+
 @dataclass
 class SubframeOutcome:
     """What one subframe produced, per scenario (arrays of the kernel's backend)."""

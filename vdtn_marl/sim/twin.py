@@ -929,7 +929,7 @@ class DigitalTwin:
         if self.radio_enabled:
             delay = self.link_state.delay_subframes
             mean_rate = self._v2i_rate_sum / max(self.subframe, 1)
-            delivered = delay <= t
+            delivered = link.cam_delivered(delay, t)
             self._cam_held = ns.where(delivered[..., None], self._cam_snapshot, self._cam_held)
             self._cam_held_interval = ns.where(
                 delivered, interval[:, None], self._cam_held_interval
