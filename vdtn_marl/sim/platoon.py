@@ -25,7 +25,16 @@ from dataclasses import dataclass, fields
 import numpy as np
 import torch
 
-from vdtn_marl.sim.backend import cast_like, clamp, repeat_rows, stack, to_numpy, to_torch, xp
+from vdtn_marl.sim.backend import (
+    as_float,
+    cast_like,
+    clamp,
+    repeat_rows,
+    stack,
+    to_numpy,
+    to_torch,
+    xp,
+)
 from vdtn_marl.sim.layout import VEHICLE_OBS_FEATURES  # noqa: F401 - re-exported; one definition, in layout
 from vdtn_marl.sim.params import PlatoonParams
 
@@ -242,6 +251,21 @@ def control_reward(
         + params.weight_accel * abs(command_mps2) / params.accel_max_mps2
         + params.weight_jerk * abs(jerk) / params.jerk_max_mps3
     )
+
+
+def interval_reward(
+    before: PlatoonState, after: PlatoonState, command_mps2: torch.Tensor, params: PlatoonParams
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """One interval's reward [B, F] from the states before and after it and the followers'
+    commands u_k [B, F]: :func:`control_reward` of the errors at its end, plus
+    ``collision_penalty`` for each follower where a gap closed (≤ 0). Returns (reward,
+    gap error, speed error, collided [B, F]); the twin and the IVoI rollouts both pay this."""
+    gap_error, speed_error = spacing_errors(after, params)
+    previous = params.topology.followers_of(before.command_mps2)
+    reward = control_reward(gap_error, speed_error, command_mps2, previous, params)
+    collided = gaps_m(after.position_m, params) <= 0
+    reward = reward + as_float(collided) * params.collision_penalty
+    return reward, gap_error, speed_error, collided
 
 
 def vehicle_observation(

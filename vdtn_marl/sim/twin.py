@@ -72,9 +72,8 @@ from vdtn_marl.sim.platoon import (
     IntervalIntegrator,
     PlatoonState,
     cam_snapshot,
-    control_reward,
-    gaps_m,
     initial_state,
+    interval_reward,
     perfect_observation,
     spacing_errors,
     vehicle_observation,
@@ -920,11 +919,8 @@ class DigitalTwin:
         before, interval = self._platoon, self._interval
         u = clamp(ns.float32(commands_mps2), lo, hi)
         after = self.integrator.integrate(before, self._leader_accel_mps2(interval), u, switch)
-        gap_error, speed_error = spacing_errors(after, pp)
+        reward, gap_error, speed_error, collided = interval_reward(before, after, u, pp)
         follower = self.topology.followers_of
-        reward = control_reward(gap_error, speed_error, u, follower(before.command_mps2), pp)
-        collided = gaps_m(after.position_m, pp) <= 0
-        reward = reward + as_float(collided) * pp.collision_penalty
 
         if self.radio_enabled:
             delay = self.link_state.delay_subframes

@@ -19,8 +19,7 @@ from vdtn_marl.sim.platoon import (
     SPEED_ERROR_BOUND_MPS,
     IntervalIntegrator,
     PlatoonState,
-    control_reward,
-    gaps_m,
+    interval_reward,
     perfect_observation,
     spacing_errors,
 )
@@ -174,13 +173,8 @@ def _rollout(
             u = policy(perfect_observation(state, pp))
             switch = zero_switch
         after = integrator.integrate(state, leader[:, h], u, switch)
-        gap_error, speed_error = spacing_errors(after, pp)
-        follower = pp.topology.followers_of
-        reward = control_reward(
-            gap_error, speed_error, follower(after.command_mps2), follower(state.command_mps2), pp
-        )
-        collided = gaps_m(after.position_m, pp) <= 0
-        reward = reward + as_float(collided) * pp.collision_penalty
+        command = pp.topology.followers_of(after.command_mps2)
+        reward, gap_error, speed_error, collided = interval_reward(state, after, command, pp)
         if stop_at_episode_end:
             inside = as_float(interval + h < twin.params.episode_intervals)[:, None]
             reward = reward * inside
