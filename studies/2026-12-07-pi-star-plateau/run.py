@@ -15,6 +15,9 @@ The cases are the (scenario, seed) pairs whose π* failed the reference check in
 `headline` 2.0 cells (platoon4 seeds 3 and 8; platoon8 seeds 0 and 1).
 
     python studies/2026-12-07-pi-star-plateau/run.py [--arms ...] [--cases platoon4:3 ...]
+    python studies/2026-12-07-pi-star-plateau/run.py --runs ARM:SCENARIO:SEED ...
+
+(`--runs` runs only the listed ones instead of every arm on every case.)
 
 Writes `runs/<arm>/<scenario>-seed<k>/` (the runs) and `results.json` (per run: the kept
 iteration, the best validation return and where it was reached, the reference check's J* − J_c
@@ -87,11 +90,11 @@ def plot(out: Path, arms: list[str], cases: list[tuple[str, int]]) -> Path:
             run_dir = out / "runs" / arm / f"{scenario}-seed{seed}"
             if (run_dir / "metrics.csv").is_file():
                 ks, vs = zip(*validation_curve(run_dir), strict=True)
-                ax.plot(ks, vs, ".-", label=arm)
+                ax.plot(ks, vs, ".-", label=arm, color=f"C{list(ARMS).index(arm)}")
         ax.set(title=f"{scenario}, seed {seed}", xlabel="π* PPO iteration",
                ylabel="validation return (per follower, interval)")  # fmt: skip
         ax.grid(alpha=0.3)
-    axes[0][0].legend(fontsize=8)
+        ax.legend(fontsize=8)
     fig.tight_layout()
     path = out / "learning_curves.png"
     fig.savefig(path, dpi=110)
@@ -102,28 +105,34 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--arms", nargs="+", default=list(ARMS), choices=list(ARMS))
     p.add_argument("--cases", nargs="+", default=list(CASES), help="scenario:seed")
+    p.add_argument("--runs", nargs="+", default=None, help="arm:scenario:seed")
     p.add_argument("--out", type=Path, default=HERE)
     args = p.parse_args(argv)
     from vdtn_marl.io.files import atomic_write_json
 
-    cases = [(c.split(":")[0], int(c.split(":")[1])) for c in args.cases]
+    if args.runs:
+        todo = [(r.split(":")[0], r.split(":")[1], int(r.split(":")[2])) for r in args.runs]
+    else:
+        cases = [(c.split(":")[0], int(c.split(":")[1])) for c in args.cases]
+        todo = [(arm, scenario, seed) for scenario, seed in cases for arm in args.arms]
+    arms = list(dict.fromkeys(arm for arm, _, _ in todo))
+    cases = list(dict.fromkeys((scenario, seed) for _, scenario, seed in todo))
     began = time.perf_counter()
     runs = []
-    for scenario, seed in cases:
-        for arm in args.arms:
-            s = run(arm, scenario, seed, args.out)
-            curve = validation_curve(args.out / "runs" / arm / f"{scenario}-seed{seed}")
-            best_k, best_v = max(curve, key=lambda kv: kv[1])
-            runs.append({
-                "arm": arm, "scenario": scenario, "seed": seed,
-                "kept_iteration": s["selected_iterations"].get("control_perfect"),
-                "best_validation": best_v, "best_validation_at": best_k,
-                "validation_at_end": curve[-1][1],
-                "control_cost": s["control_cost"], "cacc_control_cost": s["cacc_control_cost"],
-                "reference_ok": s["reference_ok"], "reference_problems": s["reference_problems"],
-                **{f"{k}{x}": s[f"{k}{x}"] for k in KEYS for x in ("", "_ci_low", "_ci_high")},
-            })  # fmt: skip
-    path = plot(args.out, args.arms, cases)
+    for arm, scenario, seed in todo:
+        s = run(arm, scenario, seed, args.out)
+        curve = validation_curve(args.out / "runs" / arm / f"{scenario}-seed{seed}")
+        best_k, best_v = max(curve, key=lambda kv: kv[1])
+        runs.append({
+            "arm": arm, "scenario": scenario, "seed": seed,
+            "kept_iteration": s["selected_iterations"].get("control_perfect"),
+            "best_validation": best_v, "best_validation_at": best_k,
+            "validation_at_end": curve[-1][1],
+            "control_cost": s["control_cost"], "cacc_control_cost": s["cacc_control_cost"],
+            "reference_ok": s["reference_ok"], "reference_problems": s["reference_problems"],
+            **{f"{k}{x}": s[f"{k}{x}"] for k in KEYS for x in ("", "_ci_low", "_ci_high")},
+        })  # fmt: skip
+    path = plot(args.out, arms, cases)
     result = {
         "command": " ".join([Path(sys.argv[0]).name, *(argv or sys.argv[1:])]),
         "date": dt.date.today().isoformat(),
