@@ -32,6 +32,7 @@ Every file carries the benchmark's name and version.
 
 Modules: :mod:`~vdtn_marl.leaderboard.grid` (metrics, cells, their configs, the output
 directory's state), :mod:`~vdtn_marl.leaderboard.runner` (running the grid),
+:mod:`~vdtn_marl.leaderboard.pi_star` (the π* the cells share, ``benchmark.pi_star``),
 :mod:`~vdtn_marl.leaderboard.stats` (statistics across seeds, marl-eval export),
 :mod:`~vdtn_marl.leaderboard.target` (the check of ``benchmark.target``, the headline claim),
 :mod:`~vdtn_marl.leaderboard.plots` and :mod:`~vdtn_marl.leaderboard.report` (the report).
