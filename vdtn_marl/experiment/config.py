@@ -301,9 +301,17 @@ def check_fixed_policies(cfg: RunConfig) -> None:
 
 def validate(cfg: RunConfig) -> RunConfig:
     """Check every key of ``cfg``; raise :class:`ConfigError` naming key, value and range."""
-    s, a, c, r, e = cfg.scenario, cfg.algo, cfg.control, cfg.rra, cfg.experiment
-    _choice("algo.name", a.name, ALGOS)
-    _choice("algo.lr_schedule", a.lr_schedule, LR_SCHEDULES)
+    _validate_control(cfg.control)
+    _validate_rra(cfg)
+    _choice("task", cfg.task, TASKS)
+    _validate_algo(cfg)
+    _validate_run(cfg)
+    _validate_scenario(cfg)
+    return cfg
+
+
+def _validate_control(c: ControlConfig) -> None:
+    """``control.*``: who drives the followers, and π*'s options."""
     _choice("control.name", c.name, CONTROLS)
     _choice("control.completion", c.completion, COMPLETIONS)
     _choice("control.warm_start", c.warm_start, WARM_STARTS)
@@ -328,6 +336,11 @@ def validate(cfg: RunConfig) -> RunConfig:
             "control.completion_predictor=None: control.completion=learned needs the path of a "
             "predictor saved by vdtn_marl.algos.completion.train_completion_predictor"
         )
+
+
+def _validate_rra(cfg: RunConfig) -> None:
+    """``rra.*``: the RRA policy, its reward and the IVoI estimator."""
+    c, r = cfg.control, cfg.rra
     _choice("rra.name", r.name, RRA_METHODS)
     _check_user_policies(c, r)
     _choice("rra.ivoi_estimator", r.ivoi_estimator, IVOI_ESTIMATORS)
@@ -355,7 +368,6 @@ def validate(cfg: RunConfig) -> RunConfig:
             f"rra.ivoi_baseline={r.ivoi_baseline!r} needs rra.ivoi_estimator=rollout "
             f"(got {r.ivoi_estimator!r}; td must compare with π*: rra.ivoi_baseline=optimal)"
         )
-    _choice("task", cfg.task, TASKS)
     _real("rra.kappa1", r.kappa1, 0.0, 1.0)
     if r.kappa2 is not None:
         _real("rra.kappa2", r.kappa2, 0.0, 1.0)
@@ -368,6 +380,13 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("rra.ivoi_scale", r.ivoi_scale, 0.0, 1e6)
     _real("rra.miss_penalty", r.miss_penalty, 0.0, 1e6)
     _real("rra.aoi_scale", r.aoi_scale, 0.0, 1e6)
+
+
+def _validate_algo(cfg: RunConfig) -> None:
+    """``algo.*``: the learner's sizes, rates and switches."""
+    a, s = cfg.algo, cfg.scenario
+    _choice("algo.name", a.name, ALGOS)
+    _choice("algo.lr_schedule", a.lr_schedule, LR_SCHEDULES)
     for key in (
         "depth",
         "num_cells",
@@ -413,6 +432,11 @@ def validate(cfg: RunConfig) -> RunConfig:
     _real("algo.entropy_coef", a.entropy_coef, 0.0, 1e3)
     _real("algo.critic_coef", a.critic_coef, 0.0, 1e3)
     _real("algo.max_grad_norm", a.max_grad_norm, 0.0, 1e6, low_open=True)
+
+
+def _validate_run(cfg: RunConfig) -> None:
+    """``experiment.*``, ``seed``, ``threads``, loggers and video."""
+    e = cfg.experiment
     for key in ("jocc_iterations", "eval_episodes", "eval_intervals"):
         _positive_int(f"experiment.{key}", getattr(e, key))
     for key in ("control_iterations", "rra_iterations", "checkpoint_every"):
@@ -426,6 +450,11 @@ def validate(cfg: RunConfig) -> RunConfig:
     _choice("video_scenarios", cfg.video_scenarios, tuple(VIDEO_SCENARIOS))
     if cfg.video:
         check_video(cfg.video_format)  # imageio installed (vdtn-marl[video])
+
+
+def _validate_scenario(cfg: RunConfig) -> None:
+    """``scenario.*``: the model's ranges, the traces and the evaluation windows."""
+    s, e = cfg.scenario, cfg.experiment
     _choice("scenario.kind", s.kind, tuple(SCENARIOS))
     cfg.twin_params()  # the model validates its own ranges (num_vehicles, bandwidth, ...)
     _check_task(cfg)
@@ -460,7 +489,6 @@ def validate(cfg: RunConfig) -> RunConfig:
             f"experiment.eval_intervals={e.eval_intervals!r} must be <= "
             f"scenario.episode_intervals={s.episode_intervals!r}"
         )
-    return cfg
 
 
 def from_dict(data: dict[str, Any]) -> RunConfig:
