@@ -898,49 +898,17 @@ class DigitalTwin:
         ``command_if_lost_mps2`` [B, F] (optional, clipped alike) is only recorded, for IVoI
         estimators that compare with a lost CAM.
         """
-        t = self.subframes_per_interval
-        if self.radio_enabled and not perfect and self.subframe != t:
-            raise RuntimeError(
-                f"finish_interval after {self.subframe} of {t} subframes; run all {t} first"
-            )
-        expected = (self.batch_size, self.num_followers)
-        if tuple(commands_mps2.shape) != expected:
-            raise ValueError(
-                f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}"
-            )
-        if command_if_lost_mps2 is not None and tuple(command_if_lost_mps2.shape) != expected:
-            raise ValueError(
-                f"command_if_lost_mps2 has shape {tuple(command_if_lost_mps2.shape)}, "
-                f"expected {expected}"
-            )
+        self._check_finish(commands_mps2, perfect, command_if_lost_mps2)
         ns, pp = self.ns, self.params.platoon
-        lo, hi = pp.accel_min_mps2, pp.accel_max_mps2
+        # the platoon: u_k takes force at the switch subframe; the reward of where it ends
         switch = self._switch_subframe(perfect)
         before, interval = self._platoon, self._interval
-        u = clamp(ns.float32(commands_mps2), lo, hi)
+        u = clamp(ns.float32(commands_mps2), pp.accel_min_mps2, pp.accel_max_mps2)
         after = self.integrator.integrate(before, self._leader_accel_mps2(interval), u, switch)
         reward, gap_error, speed_error, collided = interval_reward(before, after, u, pp)
-        follower = self.topology.followers_of
-
-        if self.radio_enabled:
-            delay = self.link_state.delay_subframes
-            mean_rate = self._v2i_rate_sum / max(self.subframe, 1)
-            delivered = link.cam_delivered(delay, t)
-            self._cam_held = ns.where(delivered[..., None], self._cam_snapshot, self._cam_held)
-            self._cam_held_interval = ns.where(
-                delivered, interval[:, None], self._cam_held_interval
-            )
-        else:
-            delay = ns.zeros(switch.shape, "int64")
-            mean_rate = ns.zeros((self.batch_size, self.num_subchannels))
-        # the recipients' histories the next interval's RRA observation reads
-        delay_fraction = clamp(as_float(delay) / (t + 1), 0.0, 1.0)
-        self._cam_delay_history = cat(
-            [delay_fraction[..., None], self._cam_delay_history[..., :-1]]
-        )
-        self._command_history = cat(
-            [follower(before.command_mps2)[..., None], self._command_history[..., :-1]]
-        )
+        # the radio: which CAMs arrived (the recipients now hold them), the mean V2I rate
+        delay, mean_rate = self._close_radio(interval, switch.shape)
+        self._push_histories(delay, self.topology.followers_of(before.command_mps2))
         self._platoon, self._interval = after, interval + 1
         # the record is the edge: torch tensors (sharing the NumPy arrays' memory)
         out = ns.to_torch
@@ -960,8 +928,55 @@ class DigitalTwin:
             command_if_lost_mps2=(
                 None
                 if command_if_lost_mps2 is None
-                else out(clamp(ns.float32(command_if_lost_mps2), lo, hi))
+                else out(
+                    clamp(ns.float32(command_if_lost_mps2), pp.accel_min_mps2, pp.accel_max_mps2)
+                )
             ),
+        )
+
+    def _check_finish(self, commands_mps2, perfect: bool, command_if_lost_mps2) -> None:
+        """:meth:`finish_interval`'s preconditions: all T subframes ran (with radio), and the
+        commands are [B, F]."""
+        t = self.subframes_per_interval
+        if self.radio_enabled and not perfect and self.subframe != t:
+            raise RuntimeError(
+                f"finish_interval after {self.subframe} of {t} subframes; run all {t} first"
+            )
+        expected = (self.batch_size, self.num_followers)
+        if tuple(commands_mps2.shape) != expected:
+            raise ValueError(
+                f"commands have shape {tuple(commands_mps2.shape)}, expected {expected}"
+            )
+        if command_if_lost_mps2 is not None and tuple(command_if_lost_mps2.shape) != expected:
+            raise ValueError(
+                f"command_if_lost_mps2 has shape {tuple(command_if_lost_mps2.shape)}, "
+                f"expected {expected}"
+            )
+
+    def _close_radio(self, interval, shape: tuple[int, ...]):
+        """The interval's CAM delivery subframes [B, L] and mean V2I rate per sub-channel
+        [B, M]; a CAM delivered within the interval becomes what its recipient holds. Without
+        radio: every CAM on time (delay 0), no V2I traffic."""
+        ns = self.ns
+        if not self.radio_enabled:
+            return ns.zeros(shape, "int64"), ns.zeros((self.batch_size, self.num_subchannels))
+        delay = self.link_state.delay_subframes
+        mean_rate = self._v2i_rate_sum / max(self.subframe, 1)
+        delivered = link.cam_delivered(delay, self.subframes_per_interval)
+        self._cam_held = ns.where(delivered[..., None], self._cam_snapshot, self._cam_held)
+        self._cam_held_interval = ns.where(delivered, interval[:, None], self._cam_held_interval)
+        return delay, mean_rate
+
+    def _push_histories(self, delay, previous_command_mps2) -> None:
+        """The recipients' histories the next interval's RRA observation reads: the CAM's
+        delivery subframe d/(T+1) and the command u_{k−1}, newest first."""
+        t = self.subframes_per_interval
+        delay_fraction = clamp(as_float(delay) / (t + 1), 0.0, 1.0)
+        self._cam_delay_history = cat(
+            [delay_fraction[..., None], self._cam_delay_history[..., :-1]]
+        )
+        self._command_history = cat(
+            [previous_command_mps2[..., None], self._command_history[..., :-1]]
         )
 
 
