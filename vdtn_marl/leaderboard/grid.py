@@ -5,7 +5,7 @@ benchmark).
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -110,12 +110,18 @@ def bench_config(data: Mapping[str, Any]) -> BenchConfig:
 def compose_cell(cell: Cell, device: str) -> tuple[dict, Any]:
     """(composed config as plain data, validated RunConfig) of a cell, through the CLI's own
     composition and validation (:func:`vdtn_marl.experiment.compose.to_run_config`)."""
-    overrides = [*cell.overrides, f"device={device}", "resume=true", "progress=false"]
+    return compose_run(f"cell {cell.name}", cell.overrides, device, "jocc")
+
+
+def compose_run(name: str, overrides: Sequence[str], device: str, command: str) -> tuple[dict, Any]:
+    """:func:`compose_cell` of any run of the grid (a cell, a shared π*): its ``overrides``
+    composed for ``command``; an error names the run."""
+    overrides = [*overrides, f"device={device}", "resume=true", "progress=false"]
     try:
         data = job_config(compose_config("config", overrides))
-        return data, to_run_config(data, "jocc")
+        return data, to_run_config(data, command)
     except Exception as exc:
-        raise LeaderboardError(f"cell {cell.name}: {translate(exc, 'config', overrides)}") from exc
+        raise LeaderboardError(f"{name}: {translate(exc, 'config', overrides)}") from exc
 
 
 def check_eval_pairing(cells_data: Mapping[Cell, Mapping[str, Any]]) -> None:
@@ -208,7 +214,6 @@ def with_recorded_submissions(cfg: BenchConfig) -> BenchConfig:
 def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
     """The cell's summary if the cell is finished (else None). A finished cell whose config
     differs from ``data`` (outside :data:`FREE_KEYS`) raises :class:`LeaderboardError`."""
-    from vdtn_marl.reporting.tables import flatten
 
     path = cell_dir / SUMMARY_FILE
     if not path.is_file():
@@ -222,6 +227,15 @@ def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
     iterations = data.get("experiment", {}).get("jocc_iterations")
     if summary.get("iterations") != iterations:
         return None
+    check_same_config(path, summary, data)
+    return summary
+
+
+def check_same_config(path: Path, summary: Mapping[str, Any], data: Mapping[str, Any]) -> None:
+    """A finished run's config (in its summary at ``path``) is ``data`` outside
+    :data:`FREE_KEYS`; else :class:`LeaderboardError` naming the first key that differs."""
+    from vdtn_marl.reporting.tables import flatten
+
     old, new = flatten(summary.get("config") or {}), flatten(dict(data))
     for key in sorted(set(old) & set(new)):
         free = key in FREE_KEYS or key.split(".")[0] in FREE_KEYS
@@ -229,6 +243,5 @@ def complete_summary(cell_dir: Path, data: Mapping[str, Any]) -> dict | None:
             raise LeaderboardError(
                 f"{path} was run with {key}={old[key]!r}, the benchmark now gives "
                 f"{key}={new[key]!r}; bump benchmark.version (a new out_dir) or remove "
-                f"{cell_dir} to run it again"
+                f"{path.parent} to run it again"
             )
-    return summary

@@ -24,10 +24,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from vdtn_marl.errors import LeaderboardError, RunDirInUse
-from vdtn_marl.experiment.compose import compose_config, job_config, to_run_config, translate
+from vdtn_marl.errors import RunDirInUse
 from vdtn_marl.experiment.config import PI_STAR_NAME, BenchmarkConfig
 from vdtn_marl.io.files import CONFIG_FILE, SUMMARY_FILE, atomic_write_text, read_json, run_lock
+from vdtn_marl.leaderboard.grid import check_same_config, compose_run
 
 _log = logging.getLogger(__name__)
 #: seconds between two looks at a π* another job trains
@@ -80,19 +80,12 @@ def pi_star_runs(
 
 def compose_pi_star(run: PiStarRun, device: str) -> tuple[dict, Any]:
     """(composed config as plain data, validated RunConfig) of a π* run."""
-    overrides = [*run.overrides, f"device={device}", "resume=true", "progress=false"]
-    try:
-        data = job_config(compose_config("config", overrides))
-        return data, to_run_config(data, "train")
-    except Exception as exc:
-        raise LeaderboardError(f"{run.name}: {translate(exc, 'config', overrides)}") from exc
+    return compose_run(run.name, run.overrides, device, "train")
 
 
 def finished(run: PiStarRun, data: dict, out_dir: str | Path) -> bool:
-    """Whether the π* run ended (its summary is written) with the config ``data``; a finished
-    run of another config raises :class:`LeaderboardError`."""
-    from vdtn_marl.reporting.tables import flatten
-
+    """Whether the π* run ended (its summary and checkpoint are written) with the config
+    ``data``; a finished run of another config raises :class:`LeaderboardError`."""
     path = run.directory(out_dir) / SUMMARY_FILE
     if not path.is_file() or not run.checkpoint(out_dir).is_file():
         return False
@@ -102,17 +95,7 @@ def finished(run: PiStarRun, data: dict, out_dir: str | Path) -> bool:
         return False
     if summary.get("task") != "control":
         return False
-    old, new = flatten(summary.get("config") or {}), flatten(dict(data))
-    for key in sorted(set(old) & set(new)):
-        if (
-            key.split(".")[0] not in ("resume", "progress", "device", "threads")
-            and old[key] != new[key]
-        ):
-            raise LeaderboardError(
-                f"{path} was run with {key}={old[key]!r}, the benchmark now gives "
-                f"{key}={new[key]!r}; bump benchmark.version (a new out_dir) or remove "
-                f"{run.directory(out_dir)} to train π* again"
-            )
+    check_same_config(path, summary, data)
     return True
 
 
