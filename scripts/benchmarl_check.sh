@@ -6,6 +6,8 @@
 #
 #   bash scripts/benchmarl_check.sh          the check (a few minutes; setup once more)
 #   bash scripts/benchmarl_check.sh full     the same, then the whole test suite on that stack
+#   bash scripts/benchmarl_check.sh setup    only build the environment (.ci/run builds it
+#                                            while the main suite runs)
 #
 # .ci/run runs the check (not `full`) after the main suite; docs/integrations.md has its timing.
 # Run `full` when the integration, the environments' TorchRL face or the pins change.
@@ -27,8 +29,8 @@ say() { printf '[benchmarl_check] %s\n' "$*" >&2; }
 die() { printf '[benchmarl_check] error: %s\n' "$*" >&2; exit 1; }
 
 case "${1:-}" in
-  "" | full) ;;
-  *) die "unknown argument '$1' (usage: bash scripts/benchmarl_check.sh [full])" ;;
+  "" | full | setup) ;;
+  *) die "unknown argument '$1' (usage: bash scripts/benchmarl_check.sh [full|setup])" ;;
 esac
 
 # shellcheck source=scripts/extra_venv.sh
@@ -39,6 +41,7 @@ extra_venv_setup "$VENV" "$CONSTRAINTS" test,benchmarl
 say "setup: ${SECONDS}s ($("$PY" -c 'import benchmarl, torchrl, tensordict, torch
 print("benchmarl", benchmarl.__version__, "torchrl", torchrl.__version__,
       "tensordict", tensordict.__version__, "torch", torch.__version__)'))"
+[[ "${1:-}" == setup ]] && exit 0
 
 start=$SECONDS
 say "tests of the integration"

@@ -7,7 +7,9 @@
 # MLflow's loggers and of the MP4 writer, as constraints.txt has none of these libraries; here
 # the check fails if any test is skipped or one of those four did not pass.
 #
-#   bash scripts/extras_check.sh
+#   bash scripts/extras_check.sh          the check
+#   bash scripts/extras_check.sh setup    only build the environment (.ci/run builds it while the
+#                                 main suite runs)
 #
 # .ci/run runs it after the main suite; docs/cli.md (Loggers) has its timing.
 # Environment variables:
@@ -26,7 +28,10 @@ CONSTRAINTS=constraints-extras.txt
 say() { printf '[extras_check] %s\n' "$*" >&2; }
 die() { printf '[extras_check] error: %s\n' "$*" >&2; exit 1; }
 
-[[ $# -eq 0 ]] || die "unknown argument '$1' (usage: bash scripts/extras_check.sh)"
+case "${1:-}" in
+  "" | setup) ;;
+  *) die "unknown argument '$1' (usage: bash scripts/extras_check.sh [setup])" ;;
+esac
 
 # shellcheck source=scripts/extra_venv.sh
 source scripts/extra_venv.sh
@@ -35,6 +40,7 @@ SECONDS=0
 extra_venv_setup "$VENV" "$CONSTRAINTS" test,tensorboard,wandb,mlflow,video
 say "setup: ${SECONDS}s ($("$PY" -c 'import importlib.metadata as m
 print(", ".join(f"{p} {m.version(p)}" for p in ("tensorboard", "wandb", "mlflow", "imageio-ffmpeg", "torch")))'))"
+[[ "${1:-}" == setup ]] && exit 0
 
 # The tests that the main suite skips for want of these libraries; each must pass here.
 MUST_PASS=(

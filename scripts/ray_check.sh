@@ -5,7 +5,9 @@
 # constraints.txt's pins moved, and runs a two-job `vdtn-marl -m jocc experiment=smoke` sweep on
 # a local Ray instance there (tests/test_cli.py::test_ray_sweep_two_jobs_real).
 #
-#   bash scripts/ray_check.sh
+#   bash scripts/ray_check.sh          the check
+#   bash scripts/ray_check.sh setup    only build the environment (.ci/run builds it while the
+#                                 main suite runs)
 #
 # .ci/run runs it after the main suite. Environment variables:
 #   RAY_VENV         where to build the environment (default: .venv-ray in the repository)
@@ -23,7 +25,10 @@ CONSTRAINTS=constraints-ray.txt
 say() { printf '[ray_check] %s\n' "$*" >&2; }
 die() { printf '[ray_check] error: %s\n' "$*" >&2; exit 1; }
 
-[[ $# -eq 0 ]] || die "unknown argument '$1' (usage: bash scripts/ray_check.sh)"
+case "${1:-}" in
+  "" | setup) ;;
+  *) die "unknown argument '$1' (usage: bash scripts/ray_check.sh [setup])" ;;
+esac
 
 # shellcheck source=scripts/extra_venv.sh
 source scripts/extra_venv.sh
@@ -34,6 +39,7 @@ SECONDS=0
 extra_venv_setup "$VENV" "$CONSTRAINTS" test,ray hydra-ray-launcher
 say "setup: ${SECONDS}s ($("$PY" -c 'import importlib.metadata as m
 print(", ".join(f"{p} {m.version(p)}" for p in ("ray", "hydra-ray-launcher", "torch")))'))"
+[[ "${1:-}" == setup ]] && exit 0
 
 # The tested set of the main environment stays as it is beside Ray.
 "$PY" - constraints.txt <<'EOF' || die "the Ray environment moved pins of constraints.txt"
