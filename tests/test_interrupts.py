@@ -100,7 +100,7 @@ def test_ctrl_c_while_the_app_is_imported_exits_130_with_one_line(tmp_path):
 
 def test_the_hint_continues_an_interrupted_run_to_its_end(tmp_path):
     run = tmp_path / "run"
-    proc = _start(run, iterations=40)
+    proc = _start(run, iterations=12)
     deadline = time.monotonic() + 120
     while not (run / "metrics.csv").is_file():  # training has begun
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()[1]
