@@ -3,7 +3,8 @@ over N worker processes, one core each, collected together every PPO iteration.
 
 A run keeps torch on one thread, and the collection of π̃ (an interval of control and 50
 subframes of radio, with the RRA policy called every subframe, on small tensors) does not
-gain from a second thread (docs/performance.md, *Settings that change the speed*). Processes do: each worker holds
+gain from a second thread (docs/performance.md, *Settings that change the speed*). Processes
+do: each worker holds
 ``B / N`` scenarios of the trainer's environment, built by the trainer's ``env_factory`` in the
 worker, and keeps them (and where they continue) from one PPO iteration to the next, as
 ``algo.persistent_envs`` keeps them in the trainer's own process. Every iteration the trainer
