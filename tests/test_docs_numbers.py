@@ -198,3 +198,15 @@ def test_performance_page_quotes_pi_tildes_budget_at_the_paper_sizes_as_generate
     assert quoted in page, quoted
 
 
+
+
+def test_readme_quotes_the_default_runs_time_as_generated():
+    """The README's time for the default run comes from that run's committed summary
+    (benchmarks/results/default_run/)."""
+    summary = json.loads((ROOT / "benchmarks/results/default_run/summary.json").read_text())
+    assert summary["task"] == "jocc" and summary["warm_start"]["teacher"] == "causal_mpc"
+    expected = (
+        f"{summary['seconds'] / 60:.1f} min on a quiet 2-core CPU, "
+        f"{summary['warm_start']['seconds'] / 60:.1f} of them π*'s warm start"
+    )
+    assert expected in _one_line(README), expected
