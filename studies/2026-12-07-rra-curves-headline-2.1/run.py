@@ -82,7 +82,7 @@ def main() -> None:
             assert all(len(c["reward"]) == iters for c in cells), (scenario, method)
             reward = [_t_interval([c["reward"][i] for c in cells]) for i in range(iters)]
             val = [_t_interval([c["validation"][i] for c in cells]) for i in range(iters)]
-            by_jocc = np.array([c["jocc_iteration"] for c in cells[0:1]][0])
+            by_jocc = np.array(cells[0]["jocc_iteration"])  # the same in every seed
             last, prev = by_jocc == by_jocc.max(), by_jocc == by_jocc.max() - 1
             change = _t_interval(
                 [np.mean(np.array(c["reward"])[last]) - np.mean(np.array(c["reward"])[prev])
