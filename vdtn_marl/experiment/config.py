@@ -166,6 +166,9 @@ class RRAConfig:
     # policy is scored on fixed validation scenarios and the best is kept, the stage's start
     # a candidate (with a warm start: PPO must beat the imitated policy); 0: the last iterate
     validate_every: int = 0
+    # learned RRA: the RRA agents also observe the CAM content's innovation (the model
+    # parameter rra_cam_innovation; vdtn_marl.sim.layout.RRA_CAM_INNOVATION)
+    cam_innovation: bool = False
 
     @property
     def learned(self) -> bool:
@@ -219,9 +222,18 @@ class RunConfig:
     # control return: episode_best and episode_worst, by a second run of the evaluation)
     video_scenarios: str = "first"
 
+    def model_kwargs(self) -> dict[str, Any]:
+        """The scenario's model keywords (:meth:`ScenarioConfig.model_kwargs`), with
+        ``rra.cam_innovation`` as the model parameter ``rra_cam_innovation``: the one place
+        the RRA config reaches into the model (the RRA agents' observation)."""
+        kw = self.scenario.model_kwargs()
+        if self.rra.cam_innovation:
+            kw["rra_cam_innovation"] = True
+        return kw
+
     def twin_params(self) -> TwinParams:
         """The model of the run, with its scenario's topology."""
-        return scenario_params(**self.scenario.model_kwargs())
+        return scenario_params(**self.model_kwargs())
 
 
 def _choice(key: str, value: Any, allowed: tuple[str, ...]) -> None:
@@ -352,6 +364,13 @@ def _validate_rra(cfg: RunConfig) -> None:
             f"rra=jocc, not rra={r.name!r} (allowed here: rra.term_scales=fixed)"
         )
     _positive_int("rra.validate_every", r.validate_every, low=0)
+    if not isinstance(r.cam_innovation, bool):
+        raise ConfigError(f"rra.cam_innovation={r.cam_innovation!r} must be true or false")
+    if r.cam_innovation and cfg.scenario.model.get("rra_cam_innovation") is False:
+        raise ConfigError(
+            "rra.cam_innovation=true contradicts scenario.model.rra_cam_innovation=false; "
+            "set one of them"
+        )
     _choice("rra.value_fit", r.value_fit, VALUE_FITS)
     _positive_int("rra.value_fit_horizon", r.value_fit_horizon, high=100_000)
     if r.value_fit != "none" and r.ivoi_estimator != "td":

@@ -209,7 +209,7 @@ class JointOptimisation:
             _log.warning(note)
         env_kw: dict[str, Any] = dict(
             batch_size=cfg.algo.num_envs, device=self.device, seed=cfg.seed,
-            trace_source=self.train_traces, **cfg.scenario.model_kwargs(),
+            trace_source=self.train_traces, **cfg.model_kwargs(),
         )  # fmt: skip
         self._user_policies: dict[str, Any] = {}  # rra=policy, control=policy: built once
         # 1. π*, the reference: the controller on perfect observations

@@ -31,6 +31,13 @@ feature                      width  content
 ``command_history``          C      recipient's earlier commands u_{k−2}, u_{k−3}, … / u_max
 ===========================  =====  ==========================================================
 
+With ``RadioParams.rra_cam_innovation`` one block follows them (:data:`RRA_CAM_INNOVATION`):
+
+===========================  =====  ==========================================================
+``cam_innovation``           2      the predecessor's acceleration and command at kΔt minus
+                                    the ones in the CAM the recipient holds, / u_max
+===========================  =====  ==========================================================
+
 The last three blocks are what predicts the recipient's IVoI (how stale its information is,
 whether its last CAMs arrived, how it has been acting): the seed paper asks the RRA state to
 hold what predicts the IVoI, and its companion (Lei et al., Part II) augments the RRA state
@@ -100,6 +107,11 @@ RRA_OBS_FEATURES: tuple[Feature, ...] = (
 )
 """The RRA observation features, in order (see the module doc)."""
 
+#: The block appended with ``RadioParams.rra_cam_innovation``: what delivering this interval's
+#: CAM would change in what the recipient holds (its magnitude predicts the value of that
+#: delivery; studies/2026-12-07-cam-innovation).
+RRA_CAM_INNOVATION = Feature("cam_innovation", *_CTRL, width=2)
+
 #: The control block (recipient's errors, predecessor's acceleration, recipient's command).
 RRA_CONTROL_BLOCK = ("gap_error", "speed_error", "pred_accel", "command")
 #: The features that predict the recipient's IVoI.
@@ -117,19 +129,23 @@ class RRAFeatureLayout:
     num_subchannels: int
     slices: dict[str, slice]
     dim: int
+    features: tuple[Feature, ...] = RRA_OBS_FEATURES
 
     @classmethod
     def from_radio(cls, radio) -> RRAFeatureLayout:
-        return cls.for_subchannels(radio.num_subchannels)
+        return cls.for_subchannels(radio.num_subchannels, radio.rra_cam_innovation)
 
     @classmethod
-    def for_subchannels(cls, num_subchannels: int) -> RRAFeatureLayout:
+    def for_subchannels(
+        cls, num_subchannels: int, cam_innovation: bool = False
+    ) -> RRAFeatureLayout:
+        features = RRA_OBS_FEATURES + ((RRA_CAM_INNOVATION,) if cam_innovation else ())
         slices, start = {}, 0
-        for feature in RRA_OBS_FEATURES:
+        for feature in features:
             width = feature.width * (num_subchannels if feature.per_subchannel else 1)
             slices[feature.name] = slice(start, start + width)
             start += width
-        return cls(num_subchannels=num_subchannels, slices=slices, dim=start)
+        return cls(num_subchannels=num_subchannels, slices=slices, dim=start, features=features)
 
     def __getitem__(self, name: str) -> slice:
         try:
@@ -181,7 +197,7 @@ class RRAFeatureLayout:
         """Lower and upper bound of every feature, float32 [dim] each."""
         low = np.empty(self.dim, np.float32)
         high = np.empty(self.dim, np.float32)
-        for feature in RRA_OBS_FEATURES:
+        for feature in self.features:
             low[self[feature.name]] = feature.low
             high[self[feature.name]] = feature.high
         return low, high
@@ -189,7 +205,7 @@ class RRAFeatureLayout:
     def names(self) -> list[str]:
         """One name per observation column (``own_snr[2]``, ``cam_delay_history[0]``, …)."""
         out = []
-        for feature in RRA_OBS_FEATURES:
+        for feature in self.features:
             width = self[feature.name].stop - self[feature.name].start
             out += [feature.name] if width == 1 else [f"{feature.name}[{j}]" for j in range(width)]
         return out

@@ -156,6 +156,10 @@ class RadioParams:
     # Sub-channel noise power in dBm that replaces −174 dBm/Hz + 10·log10(B) when set (a
     # sensitivity knob, e.g. the −90 dBm row of the Seed's source; docs/model.md §4.4)
     noise_power_override_dbm: float | None = None
+    # The RRA observation also carries the CAM content's innovation (``cam_innovation`` of
+    # vdtn_marl.sim.layout: the predecessor's acceleration and command now minus what the
+    # recipient holds), the feature that predicts what delivering this interval's CAM is worth
+    rra_cam_innovation: bool = False
 
     @property
     def num_power_levels(self) -> int:
@@ -177,6 +181,10 @@ class RadioParams:
 
     def validate(self) -> None:
         _check_types(self)
+        if not isinstance(self.rra_cam_innovation, bool):
+            raise ConfigError(
+                f"rra_cam_innovation={self.rra_cam_innovation!r} must be true or false"
+            )
         if not 1 <= self.num_subchannels <= 64:
             raise ConfigError(f"num_subchannels={self.num_subchannels!r} is outside [1, 64]")
         _check_range(

@@ -639,6 +639,11 @@ class DigitalTwin:
         slot[..., lay["cam_age"]] = clamp(age, 0.0, RRA_CAM_AGE_CLIP_INTERVALS)[..., None]
         slot[..., lay["cam_delay_history"]] = self._cam_delay_history
         slot[..., lay["command_history"]] = history
+        if "cam_innovation" in lay.slices:  # RadioParams.rra_cam_innovation
+            now = cam_snapshot(platoon, pp)  # [B, F, 2]: what a CAM sent now would carry
+            slot[..., lay["cam_innovation"]] = clamp(
+                (now - self._cam_held) / pp.accel_max_mps2, -RRA_CONTROL_CLIP, RRA_CONTROL_CLIP
+            )
         if rows is not None:
             slot = slot.index_select(0, rows)
         time_left = self._time_left
