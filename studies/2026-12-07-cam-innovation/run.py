@@ -13,11 +13,13 @@ predecessor's acceleration (and command) now minus what the recipient holds.
 Acting system: the linear CACC on impaired observations (no completion), on platoon4's held-out
 evaluation traces. RRA: the greedy baseline, with each link made silent for a whole interval
 with probability ``--silent`` (drawn per interval and link), so that the recipients' CAM ages
-vary as they do under a learned RRA that skips intervals. Seeds are paired across nothing here:
-each seed is one run; the fits are scored on held-out seeds (leave one seed out).
+vary as they do under a learned RRA that skips intervals. Each seed is one run; the fits are
+scored on held-out seeds (leave one seed out). The committed results come from
 
-    python studies/2026-12-07-cam-innovation/run.py --seeds 6 --episodes 16 --intervals 200 \
+    python studies/2026-12-07-cam-innovation/run.py --seeds 10 --episodes 16 --intervals 200 \
         --horizon 40
+    python studies/2026-12-07-cam-innovation/run.py --seeds 10 --episodes 16 --intervals 200 \
+        --horizon 100 --out studies/2026-12-07-cam-innovation/results_horizon100.json
 
 Writes ``results.json`` (atomically) beside this file unless ``--out`` says otherwise.
 """
