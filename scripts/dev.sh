@@ -4,6 +4,7 @@
 #   bash scripts/dev.sh setup          create .venv and install the pinned, tested versions
 #   bash scripts/dev.sh run [ARGS]     setup, then vdtn-marl jocc ARGS (the default experiment)
 #   bash scripts/dev.sh test [ARGS]    setup, then ruff check . and python -m pytest -q ARGS
+#                                      on 2 worker processes (pytest-xdist, a file per worker)
 #   bash scripts/dev.sh fast [ARGS]    the same without the tests marked slow (the loop while
 #                                      editing: model and unit tests, a few minutes)
 #   bash scripts/dev.sh bench [ARGS]   setup, then python benchmarks/throughput.py ARGS
@@ -13,6 +14,8 @@
 #   PYTHON           interpreter used to create .venv (default: python3)
 #   TORCH_INDEX_URL  index to take torch from, e.g. https://download.pytorch.org/whl/cpu for a
 #                    CPU-only build on Linux (default: pip's configured index)
+#   TEST_WORKERS     pytest-xdist worker processes of test and fast (default 2; 0: the tests
+#                    run in this process, one after another)
 set -euo pipefail
 
 ROOT="$(cd -P "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
@@ -34,7 +37,8 @@ commands:
   setup    create .venv (if missing) and install torch, then the package with the pins
            in constraints.txt; a no-op when nothing changed since the last setup
   run      setup, then the default JOCC experiment: vdtn-marl jocc [OVERRIDES]
-  test     setup, then ruff check . and python -m pytest -q [ARGS]
+  test     setup, then ruff check . and python -m pytest -q [ARGS], on TEST_WORKERS (2)
+           worker processes, each test file in one of them
   fast     setup, then ruff check . and python -m pytest -q -m "not slow" [ARGS]: the model
            and unit tests, without the subprocess, training and leaderboard runs
   bench    setup, then python benchmarks/throughput.py --out outputs/benchmarks/throughput.json
@@ -116,6 +120,15 @@ cmd_setup() {
   say "setup done: $("$VENV_PY" -c 'import torch; print("torch", torch.__version__)')"
 }
 
+# pytest-xdist's worker processes: TEST_WORKERS (default 2), a whole file per worker, so a
+# module's fixtures (the leaderboard's smoke grid) are built once
+xdist_args() {
+  local n="${TEST_WORKERS:-2}"
+  [[ "$n" =~ ^[0-9]+$ ]] || return 1
+  if [[ "$n" == 0 ]]; then printf -- '-p no:xdist'; else printf -- '-n %s --dist loadfile' "$n"; fi
+}
+bad_workers() { die "TEST_WORKERS=${TEST_WORKERS:-} must be a whole number (0: no worker processes)"; }
+
 if [[ $# -lt 1 ]]; then
   usage
   exit 2
@@ -132,18 +145,22 @@ case "$command" in
     exec "$VENV/bin/vdtn-marl" jocc "$@"
     ;;
   test)
+    xdist="$(xdist_args)" || bad_workers
     cmd_setup
     say "ruff check ."
     "$VENV_PY" -m ruff check .
-    say "pytest"
-    exec "$VENV_PY" -m pytest -q "$@"
+    say "pytest ($xdist)"
+    # shellcheck disable=SC2086 # xdist holds several words
+    exec "$VENV_PY" -m pytest -q $xdist "$@"
     ;;
   fast)
+    xdist="$(xdist_args)" || bad_workers
     cmd_setup
     say "ruff check ."
     "$VENV_PY" -m ruff check .
-    say "pytest -m 'not slow'"
-    exec "$VENV_PY" -m pytest -q -m "not slow" "$@"
+    say "pytest -m 'not slow' ($xdist)"
+    # shellcheck disable=SC2086 # xdist holds several words
+    exec "$VENV_PY" -m pytest -q -m "not slow" $xdist "$@"
     ;;
   bench)
     cmd_setup

@@ -10,15 +10,18 @@ environment and the default reference policy of the rollout VoI estimator.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
+from types import SimpleNamespace
 
 import torch
 
-from vdtn_marl.sim.backend import clamp
+from vdtn_marl.sim.backend import clamp, float32_scalars
 from vdtn_marl.sim.params import PlatoonParams
 from vdtn_marl.sim.platoon import (
     GAP_ERROR_BOUND_M,
     SPEED_ERROR_BOUND_MPS,
     PlatoonState,
+    numbers,
     spacing_errors,
 )
 
@@ -55,12 +58,38 @@ class CACCController:
         ``speed_error`` are ``spacing_errors(state, params)`` when the caller has them."""
         if gap_error is None or speed_error is None:
             gap_error, speed_error = spacing_errors(state, params)
-        lo, hi = params.accel_min_mps2, params.accel_max_mps2
+        g = self._numbers
+        if numbers(params, gap_error, speed_error, state.command_mps2) is params.numbers_float32:
+            g = self._numbers_float32 or g  # float32 NumPy arrays: the same numbers, faster
+        pc = numbers(params, state.command_mps2)
+        lo, hi = pc.accel_min, pc.accel_max
         topology = params.topology
         u = (
-            self.gap_gain * clamp(gap_error, -GAP_ERROR_BOUND_M, GAP_ERROR_BOUND_M)
-            + self.speed_gain * clamp(speed_error, -SPEED_ERROR_BOUND_MPS, SPEED_ERROR_BOUND_MPS)
-            + self.feedforward_gain * clamp(topology.predecessors_of(state.command_mps2), lo, hi)
-            - self.accel_gain * clamp(topology.followers_of(state.accel_mps2), lo, hi)
+            g.gap_gain * clamp(gap_error, g.gap_lo, g.gap_hi)
+            + g.speed_gain * clamp(speed_error, g.speed_lo, g.speed_hi)
+            + g.feedforward_gain * clamp(topology.predecessors_of(state.command_mps2), lo, hi)
+            - g.accel_gain * clamp(topology.followers_of(state.accel_mps2), lo, hi)
         )
-        return clamp(u, self.params.accel_min_mps2, self.params.accel_max_mps2)
+        return clamp(u, g.lo, g.hi)
+
+    @cached_property
+    def _numbers(self) -> SimpleNamespace:
+        """The law's numbers by short name (its gains, the error clips, its output bounds)."""
+        return SimpleNamespace(
+            gap_gain=self.gap_gain,
+            speed_gain=self.speed_gain,
+            feedforward_gain=self.feedforward_gain,
+            accel_gain=self.accel_gain,
+            gap_lo=-GAP_ERROR_BOUND_M,
+            gap_hi=GAP_ERROR_BOUND_M,
+            speed_lo=-SPEED_ERROR_BOUND_MPS,
+            speed_hi=SPEED_ERROR_BOUND_MPS,
+            lo=self.params.accel_min_mps2,
+            hi=self.params.accel_max_mps2,
+        )
+
+    @cached_property
+    def _numbers_float32(self) -> SimpleNamespace | None:
+        """:attr:`_numbers` as float32 0-d arrays (see :func:`~vdtn_marl.sim.platoon.numbers`);
+        None unless every one is a Python number."""
+        return float32_scalars(**vars(self._numbers))

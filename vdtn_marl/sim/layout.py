@@ -108,8 +108,7 @@ RRA_OBS_FEATURES: tuple[Feature, ...] = (
 """The RRA observation features, in order (see the module doc)."""
 
 #: The block appended with ``RadioParams.rra_cam_innovation``: what delivering this interval's
-#: CAM would change in what the recipient holds (its magnitude predicts the value of that
-#: delivery; studies/2026-12-07-cam-innovation).
+#: CAM would change in what the recipient holds (docs/model.md §4.6).
 RRA_CAM_INNOVATION = Feature("cam_innovation", *_CTRL, width=2)
 
 #: The control block (recipient's errors, predecessor's acceleration, recipient's command).

@@ -11,6 +11,8 @@ import difflib
 import math
 import numbers
 from dataclasses import asdict, dataclass, field, fields
+from functools import cached_property
+from types import SimpleNamespace
 from typing import Any
 
 from vdtn_marl.errors import ConfigError
@@ -89,6 +91,37 @@ class PlatoonParams:
         """j_max = 2·u_max/Δt (docs/model.md §2)."""
         return 2.0 * self.accel_max_mps2 / self.control_interval_s
 
+    @cached_property
+    def numbers(self) -> SimpleNamespace:
+        """The numbers of the platoon's equations (:mod:`vdtn_marl.sim.platoon`) by short
+        name, as Python numbers."""
+        return SimpleNamespace(
+            accel_min=self.accel_min_mps2,
+            accel_max=self.accel_max_mps2,
+            length=self.vehicle_length_m,
+            standstill=self.standstill_gap_m,
+            headway=self.time_headway_s,
+            interval_s=self.control_interval_s,
+            gap_scale=self.gap_error_scale_m,
+            weight_speed=self.weight_speed,
+            speed_scale=self.speed_error_scale_mps,
+            weight_accel=self.weight_accel,
+            weight_jerk=self.weight_jerk,
+            jerk_max=self.jerk_max_mps3,
+            collision_penalty=self.collision_penalty,
+            zero=0.0,
+        )
+
+    @cached_property
+    def numbers_float32(self) -> SimpleNamespace | None:
+        """:attr:`numbers` as read-only float32 0-d NumPy arrays, for float32 NumPy arrays:
+        the same operations as with the Python numbers (NumPy casts a Python scalar to the
+        array's dtype first) at about half the cost per call on arrays of a few entries. None
+        unless every number is a Python ``int`` or ``float``."""
+        from vdtn_marl.sim.backend import float32_scalars
+
+        return float32_scalars(**vars(self.numbers))
+
     def validate(self) -> None:
         _check_types(self)
         if not 2 <= self.num_vehicles <= 64:
@@ -158,7 +191,7 @@ class RadioParams:
     noise_power_override_dbm: float | None = None
     # The RRA observation also carries the CAM content's innovation (``cam_innovation`` of
     # vdtn_marl.sim.layout: the predecessor's acceleration and command now minus what the
-    # recipient holds), the feature that predicts what delivering this interval's CAM is worth
+    # recipient holds; docs/model.md §4.6)
     rra_cam_innovation: bool = False
 
     @property

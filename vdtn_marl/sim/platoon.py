@@ -21,6 +21,7 @@ environments and of the rollout VoI estimator.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from types import SimpleNamespace
 
 import numpy as np
 import torch
@@ -83,28 +84,47 @@ class PlatoonState:
         return self._map(to_torch)
 
 
+def numbers(params: PlatoonParams, *arrays) -> SimpleNamespace:
+    """``params.numbers`` as operations on ``arrays`` take them fastest: float32 0-d arrays
+    where every one is a float32 NumPy array (the same results,
+    :attr:`PlatoonParams.numbers_float32`), else the Python numbers."""
+    for x in arrays:
+        if type(x) is not np.ndarray or x.dtype != np.float32:
+            return params.numbers
+    f32 = params.numbers_float32
+    return params.numbers if f32 is None else f32
+
+
 def gaps_m(position_m: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
     """Bumper-to-bumper gap g_i = p_pred(i) − p_i − L of each follower i to its predecessor,
     [B, N] → [B, F]."""
     topology = params.topology
-    return (
-        topology.predecessors_of(position_m)
-        - topology.followers_of(position_m)
-        - params.vehicle_length_m
-    )
+    length = numbers(params, position_m).length
+    return topology.predecessors_of(position_m) - topology.followers_of(position_m) - length
 
 
 def desired_gaps_m(speed_mps: torch.Tensor, params: PlatoonParams) -> torch.Tensor:
     """Constant-time-headway desired gap d_i = r + h·v_i of each follower, [B, N] → [B, F]."""
-    return params.standstill_gap_m + params.time_headway_s * params.topology.followers_of(speed_mps)
+    c = numbers(params, speed_mps)
+    return c.standstill + c.headway * params.topology.followers_of(speed_mps)
 
 
 def spacing_errors(state: PlatoonState, params: PlatoonParams) -> tuple[torch.Tensor, torch.Tensor]:
     """Gap error e_p = g − d (m) and speed error e_v = v_pred(i) − v_i (m/s), each [B, F]."""
+    return _spacing(state, params)[1:]
+
+
+def _spacing(state: PlatoonState, params: PlatoonParams):
+    """(gap g, gap error e_p, speed error e_v), each [B, F]: :func:`gaps_m` and
+    :func:`desired_gaps_m` in one pass (the same operations)."""
     topology = params.topology
-    gap_error = gaps_m(state.position_m, params) - desired_gaps_m(state.speed_mps, params)
-    speed_error = topology.predecessors_of(state.speed_mps) - topology.followers_of(state.speed_mps)
-    return gap_error, speed_error
+    position, speed = state.position_m, state.speed_mps
+    c = numbers(params, position, speed)
+    gap = topology.predecessors_of(position) - topology.followers_of(position) - c.length
+    follower_speed = topology.followers_of(speed)
+    gap_error = gap - (c.standstill + c.headway * follower_speed)
+    speed_error = topology.predecessors_of(speed) - follower_speed
+    return gap, gap_error, speed_error
 
 
 def initial_state(
@@ -171,6 +191,8 @@ class IntervalIntegrator:
         self.phi_t = powers[t].to(device=device, dtype=dtype)  # [3, 3]
         self.input_gain = g.to(device=device, dtype=dtype)  # [T+1, 3]
         self.leader_pos_gain = dt * dt * t * (t - 1) / 2.0  # p += T·dt·v + this·a
+        self._leader_pos_gain_float32 = np.array(self.leader_pos_gain, np.float32)
+        self._leader_pos_gain_float32.flags.writeable = False
         # the same matrices for NumPy states (the single-scenario fast path)
         self._phi_t_np = self.phi_t.cpu().numpy()
         self._input_gain_np = self.input_gain.cpu().numpy()
@@ -185,48 +207,57 @@ class IntervalIntegrator:
         state: PlatoonState,
         leader_accel_mps2: torch.Tensor,
         command_mps2: torch.Tensor,
-        switch_subframe: torch.Tensor,
+        switch_subframe: torch.Tensor | None,
     ) -> PlatoonState:
         """State at the end of the interval.
 
         ``leader_accel_mps2`` [B, Λ] (one per leader of ``params.topology``);
         ``command_mps2`` [B, F] = u_k, clipped to the actuator bounds; ``switch_subframe``
         [B, F] int in 0..T: u_{k−1} is in force for subframes < d and u_k from d on (d = T:
-        u_k takes force at the next interval). Torch tensors, or NumPy arrays for a NumPy
-        state.
+        u_k takes force at the next interval; None: 0 for every follower). Torch tensors, or
+        NumPy arrays for a NumPy state.
         """
         p = self.params
         t = p.subframes_per_interval
         topology = p.topology
         follower = topology.followers_of
-        u_new = clamp(command_mps2, p.accel_min_mps2, p.accel_max_mps2)
+        c = numbers(p, state.position_m, command_mps2, leader_accel_mps2)
+        u_new = clamp(command_mps2, c.accel_min, c.accel_max)
         u_old = follower(state.command_mps2)
-        z = stack(
-            [follower(state.position_m), follower(state.speed_mps), follower(state.accel_mps2)]
+        position, speed, accel = (
+            follower(state.position_m),
+            follower(state.speed_mps),
+            follower(state.accel_mps2),
         )
-        if isinstance(z, np.ndarray):
+        if isinstance(position, np.ndarray):
             phi, gain = self._phi_t_np, self._input_gain_np
             # z @ Φᵀ as torch's small matmul computes it (products summed in order k = 0, 1, 2,
             # no fused multiply-add), so the two backends agree bitwise
-            z_phi = z[..., 0:1] * phi[:, 0] + z[..., 1:2] * phi[:, 1] + z[..., 2:3] * phi[:, 2]
+            z_phi = (
+                position[..., None] * phi[:, 0]
+                + speed[..., None] * phi[:, 1]
+                + accel[..., None] * phi[:, 2]
+            )
         else:
             phi, gain = self.phi_t, self.input_gain
-            z_phi = z @ phi.T
+            z_phi = stack([position, speed, accel]) @ phi.T
         g_all = gain[t]  # [3]
-        g_new = gain[t - switch_subframe]  # [B, F, 3]
+        # [B, F, 3]; at switch 0 every follower's is G_T (the same numbers, no gather)
+        g_new = g_all if switch_subframe is None else gain[t - switch_subframe]
         z = z_phi + g_all * u_old[..., None] + g_new * (u_new - u_old)[..., None]
 
-        interval_s = p.control_interval_s
+        interval_s = c.interval_s
         lead_v = topology.leaders_of(state.speed_mps)  # [B, Λ]
         lead_p = (
             topology.leaders_of(state.position_m)
             + interval_s * lead_v
-            + self.leader_pos_gain * leader_accel_mps2
+            + (self.leader_pos_gain if c is p.numbers else self._leader_pos_gain_float32)
+            * leader_accel_mps2
         )
-        lead_v = clamp(lead_v + interval_s * leader_accel_mps2, 0.0)
+        lead_v = clamp(lead_v + interval_s * leader_accel_mps2, c.zero)
 
         position = topology.assemble(lead_p, z[..., 0])
-        speed = topology.assemble(lead_v, clamp(z[..., 1], 0.0))
+        speed = topology.assemble(lead_v, clamp(z[..., 1], c.zero))
         accel = topology.assemble(leader_accel_mps2, z[..., 2])
         # u_k is in force at the start of the next interval, whatever its switch time was
         command = topology.assemble(leader_accel_mps2, u_new)
@@ -244,12 +275,18 @@ def control_reward(
 
     Errors are those at the end of the interval; jerk = (u_k − u_{k−1})/Δt.
     """
-    jerk = (command_mps2 - prev_command_mps2) / params.control_interval_s
+    c = numbers(params, gap_error_m, speed_error_mps, command_mps2, prev_command_mps2)
+    return _control_reward(gap_error_m, speed_error_mps, command_mps2, prev_command_mps2, c)
+
+
+def _control_reward(gap_error_m, speed_error_mps, command_mps2, prev_command_mps2, c):
+    """:func:`control_reward` with the numbers ``c`` (:func:`numbers`)."""
+    jerk = (command_mps2 - prev_command_mps2) / c.interval_s
     return -(
-        abs(gap_error_m) / params.gap_error_scale_m
-        + params.weight_speed * abs(speed_error_mps) / params.speed_error_scale_mps
-        + params.weight_accel * abs(command_mps2) / params.accel_max_mps2
-        + params.weight_jerk * abs(jerk) / params.jerk_max_mps3
+        abs(gap_error_m) / c.gap_scale
+        + c.weight_speed * abs(speed_error_mps) / c.speed_scale
+        + c.weight_accel * abs(command_mps2) / c.accel_max
+        + c.weight_jerk * abs(jerk) / c.jerk_max
     )
 
 
@@ -260,11 +297,12 @@ def interval_reward(
     commands u_k [B, F]: :func:`control_reward` of the errors at its end, plus
     ``collision_penalty`` for each follower where a gap closed (≤ 0). Returns (reward,
     gap error, speed error, collided [B, F]); the twin and the IVoI rollouts both pay this."""
-    gap_error, speed_error = spacing_errors(after, params)
+    gap, gap_error, speed_error = _spacing(after, params)
     previous = params.topology.followers_of(before.command_mps2)
-    reward = control_reward(gap_error, speed_error, command_mps2, previous, params)
-    collided = gaps_m(after.position_m, params) <= 0
-    reward = reward + as_float(collided) * params.collision_penalty
+    c = numbers(params, gap_error, speed_error, command_mps2, previous)
+    reward = _control_reward(gap_error, speed_error, command_mps2, previous, c)
+    collided = gap <= c.zero
+    reward = reward + as_float(collided) * c.collision_penalty
     return reward, gap_error, speed_error, collided
 
 

@@ -68,7 +68,12 @@ def _export(value: Any, seen: set[int]) -> Any:
     if isinstance(value, dict):
         return {"__dict__": {k: _export(v, seen) for k, v in value.items()}}
     if hasattr(value, "__dict__"):
-        return {"__object__": {k: _export(v, seen) for k, v in vars(value).items() if not _skip(v)}}
+        items = vars(value)
+        if dataclasses.is_dataclass(value) and value.__dataclass_params__.frozen:
+            # its fields: what else an immutable value holds is derived from them (a
+            # cached_property such as PlatoonParams.numbers), and is left out
+            items = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+        return {"__object__": {k: _export(v, seen) for k, v in items.items() if not _skip(v)}}
     return _SKIPPED
 
 
@@ -126,8 +131,11 @@ def _import(current: Any, saved: Any) -> Any:
         fields = saved["__object__"]
         if dataclasses.is_dataclass(current):
             values = {k: _import(getattr(current, k, None), v) for k, v in fields.items()}
-            if current.__dataclass_params__.frozen:
-                return dataclasses.replace(current, **values)
+            if current.__dataclass_params__.frozen:  # its init fields: the rest is derived
+                names = {f.name for f in dataclasses.fields(current) if f.init}
+                return dataclasses.replace(
+                    current, **{k: v for k, v in values.items() if k in names}
+                )
             for key, value in values.items():
                 setattr(current, key, value)
             return current

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import numbers
 from dataclasses import dataclass
-from functools import cache, lru_cache
+from functools import cache, cached_property, lru_cache
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -81,11 +81,11 @@ class Topology:
 
     @property
     def leaders(self) -> tuple[int, ...]:
-        return _rows(self).leaders
+        return self._rows.leaders
 
     @property
     def followers(self) -> tuple[int, ...]:
-        return _rows(self).followers
+        return self._rows.followers
 
     @property
     def num_leaders(self) -> int:
@@ -113,7 +113,7 @@ class Topology:
     @property
     def leader_of(self) -> tuple[int, ...]:
         """For each vehicle [N], the row j of the leader at the head of its chain."""
-        return _rows(self).leader_of
+        return self._rows.leader_of
 
     @property
     def follows_leader(self) -> tuple[bool, ...]:
@@ -132,22 +132,32 @@ class Topology:
         return tuple(order[m % len(order)] for m in range(num_subchannels))
 
     # ------------------------------------------------------------------ rows of arrays
+    @cached_property
+    def _rows(self) -> _Rows:
+        """:func:`_rows` of this topology, kept on the instance: the lookups below run in the
+        simulator's inner loops, where hashing the topology for a cache costs more than the
+        indexing."""
+        return _rows(self)
+
     def row_indices(self) -> _Rows:
         """The index objects of the methods below (slices where rows are contiguous, else
         int64 arrays), for code that indexes NumPy arrays in a tight loop."""
-        return _rows(self)
+        return self._rows
 
     def followers_of(self, x: Array) -> Array:
         """``x[:, followers]``: [B, N, ...] → [B, F, ...]."""
-        return x[:, _index(_rows(self).follower_index, x)]
+        i = self._rows.follower_index
+        return x[:, i if type(i) is slice or type(x) is np.ndarray else _index(i, x)]
 
     def predecessors_of(self, x: Array) -> Array:
         """Each follower's predecessor's row: [B, N, ...] → [B, F, ...]."""
-        return x[:, _index(_rows(self).predecessor_index, x)]
+        i = self._rows.predecessor_index
+        return x[:, i if type(i) is slice or type(x) is np.ndarray else _index(i, x)]
 
     def leaders_of(self, x: Array) -> Array:
         """``x[:, leaders]``: [B, N, ...] → [B, Λ, ...]."""
-        return x[:, _index(_rows(self).leader_index, x)]
+        i = self._rows.leader_index
+        return x[:, i if type(i) is slice or type(x) is np.ndarray else _index(i, x)]
 
     def assemble(self, leader_rows: Array, follower_rows: Array) -> Array:
         """[B, N] from leader rows [B, Λ] and follower rows [B, F] (the inverse of
@@ -156,14 +166,14 @@ class Topology:
             joined = np.concatenate([leader_rows, follower_rows], axis=1)
         else:
             joined = _torch().cat([leader_rows, follower_rows], dim=1)
-        order = _rows(self).assemble_index
+        order = self._rows.assemble_index
         return joined if order is None else joined[:, _index(order, joined)]
 
     def chain_matrix(self) -> np.ndarray:
         """[F, F] float64: entry (f, g) is 1 when follower g is f itself or one of the
         followers between f and its leader (the spacings that add up to f's distance behind
         its leader)."""
-        return _rows(self).chain
+        return self._rows.chain
 
 
 @dataclass(frozen=True)

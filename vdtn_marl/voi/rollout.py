@@ -149,12 +149,10 @@ def _rollout(
         steps = np.arange(horizon_intervals)
         returns = np.zeros((rows, f), np.float32)
         alive = np.ones(rows, np.float32)
-        zero_switch = np.zeros((rows, f), np.int64)
     else:
         steps = torch.arange(horizon_intervals, device=interval.device)
         returns = torch.zeros(rows, f, device=interval.device)
         alive = torch.ones(rows, device=interval.device)
-        zero_switch = torch.zeros(rows, f, dtype=torch.long, device=interval.device)
     leader = repeat_rows(
         twin.leader_accel_mps2(interval[: twin.batch_size, None] + steps), repeats
     )  # [R, H, Λ]
@@ -163,15 +161,14 @@ def _rollout(
     gap_error, speed_error = spacing_errors(state, pp)
     weight = 1.0
     for h in range(horizon_intervals):
+        switch = None  # perfect observations: each command takes force at once
         if h == 0 and first_command is not None:
             u = first_command
-            switch = zero_switch if first_switch is None else first_switch
+            switch = first_switch
         elif perfect_command is not None:
             u = perfect_command(state, pp, gap_error, speed_error)
-            switch = zero_switch
         else:
             u = policy(perfect_observation(state, pp))
-            switch = zero_switch
         after = integrator.integrate(state, leader[:, h], u, switch)
         command = pp.topology.followers_of(after.command_mps2)
         reward, gap_error, speed_error, collided = interval_reward(state, after, command, pp)
