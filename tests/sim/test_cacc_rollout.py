@@ -1,6 +1,7 @@
 """The written-out CACC rollout on NumPy arrays (what the rollout IVoI runs at B = 1) gives the
-general rollout loop's numbers bit for bit, on every registered scenario, with and without a
-first command and switch, at the episode's end and through collisions."""
+general rollout loop's numbers bit for bit, on NumPy arrays and on torch tensors, on every
+registered scenario, with and without a first command and switch, at the episode's end and
+through collisions."""
 
 from dataclasses import fields
 
@@ -10,7 +11,7 @@ import torch
 
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.scenarios import SCENARIOS, scenario_params
-from vdtn_marl.sim.backend import repeat_rows, to_numpy
+from vdtn_marl.sim.backend import repeat_rows, to_numpy, to_torch
 from vdtn_marl.sim.platoon import PlatoonState
 from vdtn_marl.sim.twin import DigitalTwin
 from vdtn_marl.voi import rollout as rollout_module
@@ -32,15 +33,19 @@ def _record(twin: DigitalTwin, cacc: CACCController, intervals: int):
 
 def _assert_same(fused, general):
     (r_f, s_f, a_f), (r_g, s_g, a_g) = fused, general
-    np.testing.assert_array_equal(r_f, r_g)
-    np.testing.assert_array_equal(a_f, a_g)
+    np.testing.assert_array_equal(r_f, to_numpy(r_g))
+    np.testing.assert_array_equal(a_f, to_numpy(a_g))
     for field in fields(PlatoonState):
-        np.testing.assert_array_equal(getattr(s_f, field.name), getattr(s_g, field.name))
+        np.testing.assert_array_equal(getattr(s_f, field.name), to_numpy(getattr(s_g, field.name)))
+
+
+def _torch(x):
+    return None if x is None else to_torch(x)
 
 
 @pytest.mark.parametrize("scenario", sorted(SCENARIOS))
 @pytest.mark.parametrize("batch", [1, 2])
-def test_fused_cacc_rollout_equals_the_general_loop(scenario, batch):
+def test_fused_cacc_rollout_equals_the_general_loop_on_numpy_and_torch(scenario, batch):
     params = scenario_params(scenario, num_vehicles=6, episode_intervals=12)
     twin = DigitalTwin(params, batch_size=batch, seed=5, backend="numpy")
     twin.reset(seed=5)
@@ -82,7 +87,21 @@ def test_fused_cacc_rollout_equals_the_general_loop(scenario, batch):
                 )  # fmt: skip
                 for fused in (True, False)
             ]
-            _assert_same(*runs)
+            runs.append(
+                rollout_module._rollout(
+                    twin,
+                    case_state.torch(),
+                    _torch(interval),
+                    cacc,
+                    6,
+                    0.97,
+                    _torch(command),
+                    _torch(first_switch),
+                    stop,
+                )  # fmt: skip
+            )
+            _assert_same(runs[0], runs[1])
+            _assert_same(runs[0], runs[2])
             collided |= bool((runs[0][2] == 0).any())
     assert collided, "no row collided: the collision branch went untested"
 

@@ -58,10 +58,9 @@ class CACCController:
         ``speed_error`` are ``spacing_errors(state, params)`` when the caller has them."""
         if gap_error is None or speed_error is None:
             gap_error, speed_error = spacing_errors(state, params)
-        g = self._numbers
-        if numbers(params, gap_error, speed_error, state.command_mps2) is params.numbers_float32:
-            g = self._numbers_float32 or g  # float32 NumPy arrays: the same numbers, faster
-        pc = numbers(params, state.command_mps2)
+        # float32 NumPy arrays: the constants as float32 0-d arrays (the same numbers, faster)
+        pc = numbers(params, gap_error, speed_error, state.command_mps2, state.accel_mps2)
+        g = (self.numbers_float32 or self.numbers) if pc is not params.numbers else self.numbers
         lo, hi = pc.accel_min, pc.accel_max
         topology = params.topology
         u = (
@@ -73,7 +72,7 @@ class CACCController:
         return clamp(u, g.lo, g.hi)
 
     @cached_property
-    def _numbers(self) -> SimpleNamespace:
+    def numbers(self) -> SimpleNamespace:
         """The law's numbers by short name (its gains, the error clips, its output bounds)."""
         return SimpleNamespace(
             gap_gain=self.gap_gain,
@@ -89,7 +88,7 @@ class CACCController:
         )
 
     @cached_property
-    def _numbers_float32(self) -> SimpleNamespace | None:
-        """:attr:`_numbers` as float32 0-d arrays (see :func:`~vdtn_marl.sim.platoon.numbers`);
+    def numbers_float32(self) -> SimpleNamespace | None:
+        """:attr:`numbers` as float32 0-d arrays (see :func:`~vdtn_marl.sim.platoon.numbers`);
         None unless every one is a Python number."""
-        return float32_scalars(**vars(self._numbers))
+        return float32_scalars(**vars(self.numbers))

@@ -191,8 +191,8 @@ class IntervalIntegrator:
         self.phi_t = powers[t].to(device=device, dtype=dtype)  # [3, 3]
         self.input_gain = g.to(device=device, dtype=dtype)  # [T+1, 3]
         self.leader_pos_gain = dt * dt * t * (t - 1) / 2.0  # p += T·dt·v + this·a
-        self._leader_pos_gain_float32 = np.array(self.leader_pos_gain, np.float32)
-        self._leader_pos_gain_float32.flags.writeable = False
+        self.leader_pos_gain_float32 = np.array(self.leader_pos_gain, np.float32)
+        self.leader_pos_gain_float32.flags.writeable = False
         # the same matrices for NumPy states (the single-scenario fast path)
         self._phi_t_np = self.phi_t.cpu().numpy()
         self._input_gain_np = self.input_gain.cpu().numpy()
@@ -251,7 +251,7 @@ class IntervalIntegrator:
         lead_p = (
             topology.leaders_of(state.position_m)
             + interval_s * lead_v
-            + (self.leader_pos_gain if c is p.numbers else self._leader_pos_gain_float32)
+            + (self.leader_pos_gain if c is p.numbers else self.leader_pos_gain_float32)
             * leader_accel_mps2
         )
         lead_v = clamp(lead_v + interval_s * leader_accel_mps2, c.zero)
