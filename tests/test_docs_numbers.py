@@ -198,8 +198,6 @@ def test_performance_page_quotes_pi_tildes_budget_at_the_paper_sizes_as_generate
     assert quoted in page, quoted
 
 
-
-
 def test_readme_quotes_the_default_runs_time_as_generated():
     """The README's time for the default run comes from that run's committed summary
     (benchmarks/results/default_run/)."""

@@ -221,3 +221,12 @@ def test_every_registered_estimator_gives_the_reference_policy_zero_advantage(na
         twin.begin_interval()
     cfg = RunConfig()
     validate(replace(cfg, rra=replace(cfg.rra, ivoi_estimator=name)))
+
+
+def test_follower_returns_are_each_followers_share_of_the_return(tracking_setting):
+    params, _, impaired, perfect, common = tracking_setting
+    for result in (impaired, perfect):
+        per = result.follower_returns
+        assert per.shape == (common["episodes"], params.platoon.num_followers)
+        torch.testing.assert_close(per.mean(-1), result.returns)
+        assert not torch.allclose(per[:, 0], per[:, -1])  # one return per follower, not a copy

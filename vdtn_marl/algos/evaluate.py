@@ -35,7 +35,8 @@ RRAPolicy = Callable[[torch.Tensor], torch.Tensor]  # RRA observations [B, L, D]
 class EvalResult:
     """Per-scenario returns (for paired statistics) and aggregate metrics of one evaluation.
 
-    ``returns`` [B]: discounted control return, mean over followers. ``ivoi_sums`` [B]:
+    ``returns`` [B]: discounted control return, mean over followers; ``follower_returns``
+    [B, F]: the same return of each follower (front to rear). ``ivoi_sums`` [B]:
     Σ_k γ^k ξ_k, mean over followers (when an IVoI estimator was given; its expectation is
     the EVoI for the ``td`` estimator, not for ``rollout``, docs/model.md §5). ``ivoi_delivered``
     and ``ivoi_lost`` [B] (IVoI estimator and radio): per scenario, the mean ξ over the
@@ -58,6 +59,7 @@ class EvalResult:
     traces: dict[str, torch.Tensor] = field(default_factory=dict)
     cam_latency_ms: torch.Tensor | None = None  # every delivered CAM's latency (for CDFs)
     per_scenario: dict[str, torch.Tensor] = field(default_factory=dict)
+    follower_returns: torch.Tensor | None = None
 
 
 METRIC_DOC = {
@@ -319,6 +321,7 @@ def evaluate_system(
         traces=traces,
         cam_latency_ms=latency.cpu() if radio else None,
         per_scenario=per_scenario,
+        follower_returns=returns.float().cpu(),
     )
 
 

@@ -10,7 +10,10 @@ comparator     what it is
 =============  =================================================================================
 ``start``      π*'s own policy before its first PPO update (the causal-MPC imitation of
                ``control.warm_start=causal_mpc``, or the CACC prior), perfect observations
-``causal_mpc`` the causal MPC (no preview of the leader's future), perfect observations
+``causal_mpc`` the causal MPC (no preview of the leader's future), perfect observations; it
+               plans every follower's command jointly from the twin's true state (the leader's
+               acceleration and every vehicle's state), so it knows more than one follower's
+               observation, which is all π* reads
 ``cacc``       the linear CACC, perfect observations
 ``acting``     the acting system (π̃ or a control baseline under the run's RRA policy) on
                impaired observations: J* − J̃ = −EVoI
