@@ -20,18 +20,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import tempfile
 from pathlib import Path
 
 import torch
+import yaml
 
 from vdtn_marl.algos.evaluate import evaluate_system
 from vdtn_marl.algos.ppo import ActorPolicy
 from vdtn_marl.experiment.checkpoint import load_checkpoint
-from vdtn_marl.experiment.compose import hydra_compose
+from vdtn_marl.experiment.compose import to_run_config
 from vdtn_marl.experiment.evaluate import evaluation_scenarios
 from vdtn_marl.experiment.jocc import JointOptimisation
-from vdtn_marl.leaderboard.grid import compose_run
+from vdtn_marl.io.files import atomic_write_json
 from vdtn_marl.policies import make_control_baseline
 from vdtn_marl.policies.cacc import CACCController
 from vdtn_marl.voi import mean_ci
@@ -49,9 +51,8 @@ def follower_returns(loop: JointOptimisation, policy) -> torch.Tensor:
 def score_seed(cells: Path, scenario: str, seed: int) -> dict:
     run_dir = cells / scenario / "pi_star" / f"seed{seed}"
     saved = json.loads((run_dir / "summary.json").read_text())
-    overrides = [f"{k}={v}" for k, v in _overrides(cells, scenario, seed)]
-    with hydra_compose():
-        _, cfg = compose_run(f"{scenario}/pi_star/seed{seed}", overrides, "cpu", "train")
+    data = yaml.safe_load((run_dir / "config.yaml").read_text())  # the run's composed config
+    cfg = to_run_config({**data, "device": "cpu", "progress": False}, "train")
     with tempfile.TemporaryDirectory() as tmp:
         loop = JointOptimisation(cfg, tmp, task="control")
         checkpoint = load_checkpoint(run_dir / "checkpoints" / "last.pt")
@@ -63,11 +64,10 @@ def score_seed(cells: Path, scenario: str, seed: int) -> dict:
         }
         returns = {name: follower_returns(loop, p) for name, p in policies.items()}
     star = returns["pi_star"]
-    check = torch.tensor(saved["pi_star_minus_causal_mpc"], dtype=torch.float64)
     row = {
         "scenario": scenario,
         "seed": seed,
-        "summary_pi_star_minus_causal_mpc": float(check),
+        "summary_pi_star_minus_causal_mpc": saved["pi_star_minus_causal_mpc"],
         "recomputed_pi_star_minus_causal_mpc": float((star - returns["causal_mpc"]).mean()),
         "followers": [],
     }
@@ -79,14 +79,6 @@ def score_seed(cells: Path, scenario: str, seed: int) -> dict:
         entry.update({f"J_{k}": float(v[:, f].mean()) for k, v in returns.items()})
         row["followers"].append(entry)
     return row
-
-
-def _overrides(cells: Path, scenario: str, seed: int):
-    bench = json.loads((cells / "benchmark.json").read_text())
-    pairs = [("scenario", scenario), ("experiment", bench["benchmark"]["experiment"])]
-    pairs += [tuple(o.split("=", 1)) for o in bench["benchmark"]["overrides"]]
-    pairs += [tuple(o.split("=", 1)) for o in bench["benchmark"]["pi_star"]]
-    return [*pairs, ("task", "control"), ("seed", seed)]
 
 
 def plot(paths: list[Path], out: Path) -> None:
@@ -148,13 +140,7 @@ def main() -> None:
             f"summary {row['summary_pi_star_minus_causal_mpc']:+.3f})",
             flush=True,
         )
-    tmp = args.out.with_suffix(".tmp")
-    tmp.write_text(
-        json.dumps(
-            {"command": "python " + " ".join(__import__("sys").argv), "rows": rows}, indent=1
-        )
-    )
-    tmp.replace(args.out)
+    atomic_write_json(args.out, {"command": "python " + " ".join(sys.argv), "rows": rows})
 
 
 if __name__ == "__main__":
